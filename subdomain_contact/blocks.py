@@ -1,0 +1,238 @@
+"""One body's slave/master blocks, assembled from its dolfinx forms, and its solves.
+
+For body α with half-links of coefficient h̄_k on its interfaces k (METHOD.md §2):
+
+    (K^S + Σ_k h̄_k M_k) U = F + Σ_k h̄_k M_k P_k U_m,k
+
+where ``P_k`` puts master values on the slave DOFs of interface k. The matrix does not depend
+on the master values: it is factorised once. The master residual of interface k is computed
+from the solid's own reaction on its slave DOFs (the numerically stable form of METHOD.md §4):
+
+    r_k = P_kᵀ (K^S U − F + Σ_{j≠k} h̄_j M_j (U − P_j U_m,j))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import dolfinx
+import dolfinx.fem.petsc
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from subdomain_contact.interfaces import MasterLayer, slave_map
+from subdomain_contact.solvers import DIRECT, make_ksp
+from subdomain_contact.thermal import BodyForms
+
+__all__ = ["BodyBlocks"]
+
+MasterValues = Mapping[str, npt.NDArray[np.float64]]
+
+
+class BodyBlocks:
+    """Assembled blocks of one body, its factorised matrix, and its slave maps.
+
+    Args:
+        name: Body name (used in PETSc option prefixes and messages).
+        forms: The body's forms.
+        facet_tags: Facet tags of the body mesh.
+        layers: Master layer of each interface the body touches.
+        half_links: Interface name -> h̄ = 2h [W/(m^2 K)].
+    """
+
+    def __init__(
+        self,
+        name: str,
+        forms: BodyForms,
+        facet_tags: dolfinx.mesh.MeshTags,
+        layers: Mapping[str, MasterLayer],
+        half_links: Mapping[str, float],
+    ) -> None:
+        self.name, self.forms, self.V = name, forms, forms.V
+        self.comm: MPI.Comm = self.V.mesh.comm
+        self.layers = dict(layers)
+        self.half_links = {k: float(half_links[k]) for k in layers}
+        self.slaves = {k: slave_map(layer, self.V, facet_tags) for k, layer in layers.items()}
+        self._refuse_dirichlet_on_slaves()
+        self.a_body = dolfinx.fem.form(self._solid_plus_links(list(layers)))
+        self.A = _assemble(self.a_body, forms.bcs)
+        self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT)
+        self.K_free = _assemble(dolfinx.fem.form(forms.solid), [])
+        load = dolfinx.fem.form(forms.load)
+        self.F_free = dolfinx.fem.petsc.assemble_vector(load)
+        self.F_free.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        self.b0 = dolfinx.fem.petsc.assemble_vector(load)
+        dolfinx.fem.petsc.apply_lifting(self.b0, [self.a_body], bcs=[forms.bcs])
+        self.b0.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        dolfinx.fem.petsc.set_bc(self.b0, forms.bcs)
+        mass = {k: dolfinx.fem.form(forms.contact_mass[k]) for k in layers}
+        self.M_bc = {k: _assemble(mass[k], forms.bcs, diagonal=0.0) for k in layers}
+        self.M_free = {k: _assemble(mass[k], []) for k in layers}
+        stiffness = self.K_free.norm(PETSc.NormType.INFINITY)
+        self._soft = {
+            k: self.half_links[k] * self.M_free[k].norm(PETSc.NormType.INFINITY) < stiffness
+            for k in layers
+        }
+        self.T = dolfinx.fem.Function(self.V, name="temperature [K]")
+        self._rhs, self._tmp, self._slave = (self.A.createVecLeft() for _ in range(3))
+
+    def _solid_plus_links(self, interfaces: list[str]) -> ufl.Form:
+        """The solid's form plus the half-links of ``interfaces``."""
+        form = self.forms.solid
+        for k in interfaces:
+            form = form + self.half_links[k] * self.forms.contact_mass[k]
+        return form
+
+    def _refuse_dirichlet_on_slaves(self) -> None:
+        for bc in self.forms.bcs:
+            fixed = bc.dof_indices()[0]
+            for k, slaves in self.slaves.items():
+                clash = np.intersect1d(fixed, slaves.local_dofs).size
+                if self.comm.allreduce(clash, op=MPI.SUM):
+                    raise ValueError(
+                        f"body '{self.name}': a temperature condition fixes DOFs of contact "
+                        f"surface '{k}'; move it off the contact (slave values are unknowns)"
+                    )
+
+    # -- solves ---------------------------------------------------------------------------
+    def _on_slaves(self, k: str, master: npt.NDArray[np.float64]) -> PETSc.Vec:
+        """``P_k U_m,k``: master values on the slave DOFs of interface k, zero elsewhere."""
+        self._slave.zeroEntries()
+        self.slaves[k].scatter(master, self._slave.array)
+        return self._slave
+
+    def solve(self, master: MasterValues) -> dolfinx.fem.Function:
+        """Temperature [K] of the body for given master values [K] of its interfaces."""
+        b = self._rhs
+        self.b0.copy(b)
+        for k, hbar in self.half_links.items():
+            self.M_bc[k].mult(self._on_slaves(k, master[k]), self._tmp)
+            b.axpy(hbar, self._tmp)
+        self.ksp.solve(b, self.T.x.petsc_vec)
+        if self.ksp.getConvergedReason() < 0:
+            raise RuntimeError(
+                f"body '{self.name}': linear solve failed (reason {self.ksp.getConvergedReason()})"
+            )
+        self.T.x.scatter_forward()
+        return self.T
+
+    def solid_reaction(self) -> PETSc.Vec:
+        """``K^S U − F`` [W] of the last solve: fluxes the solid takes from supports and links."""
+        reaction = self.A.createVecLeft()
+        self.K_free.mult(self.T.x.petsc_vec, reaction)
+        reaction.axpy(-1.0, self.F_free)
+        return reaction
+
+    def residuals(self, master: MasterValues) -> dict[str, npt.NDArray[np.float64]]:
+        """Master residual r_k [W] of each interface, replicated, from the last solve.
+
+        Two equal forms, each exact where the other loses digits: for a stiff link
+        (h̄M larger than the solid's stiffness) the solid's reaction on the slaves; for a soft
+        link ``−h̄_k M_k (U − P_k U_m,k)``, whose round-off scales with h̄ instead of k.
+        """
+        links = {}
+        for k, hbar in self.half_links.items():
+            gap = self.T.x.petsc_vec.copy()
+            gap.axpy(-1.0, self._on_slaves(k, master[k]))
+            links[k] = self.A.createVecLeft()
+            self.M_free[k].mult(gap, links[k])
+            links[k].scale(hbar)
+        reaction = self.solid_reaction()
+        result = {}
+        for k, layer in self.layers.items():
+            if self._soft[k]:
+                r = links[k].copy()
+                r.scale(-1.0)
+            else:  # other half-links count where two contacts share slave DOFs
+                r = reaction.copy()
+                for j, link in links.items():
+                    if j != k:
+                        r.axpy(1.0, link)
+            result[k] = self.slaves[k].gather(r.array, layer.size, self.comm)
+        return result
+
+    def flux_scale(self) -> float:
+        """Norm [W] of the body's loads and of the solid's reactions in the last solve."""
+        return float(np.hypot(self.F_free.norm(), self.solid_reaction().norm()))
+
+    # -- condensed operators (dense, master order, replicated) ----------------------------
+    def mass(self, k: str) -> npt.NDArray[np.float64]:
+        """Interface mass matrix M of interface k [m^(d-1)], dense, in master order."""
+        slaves = self._slave_is(k)
+        return self._gather_dense(self.M_free[k].createSubMatrix(slaves, slaves), k)
+
+    def condensed(
+        self, k: str, interior: npt.NDArray[np.int32] | None = None
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The solid's slave blocks on interface k: ``K_ee`` and ``K_ei K_ii⁻¹ K_ie`` [W/K].
+
+        Contact term of k excluded, other interfaces' half-links included (METHOD.md §3), so
+        ``K̂_ee = K_ee − K_ei K_ii⁻¹ K_ie``. Both are dense, in master order.
+
+        Args:
+            k: Interface.
+            interior: Owned local DOFs to condense (default: every DOF not a slave of k);
+                the others are clamped.
+        """
+        B = _assemble(
+            dolfinx.fem.form(self._solid_plus_links([j for j in self.layers if j != k])),
+            self.forms.bcs,
+        )
+        slaves = self.slaves[k].local_dofs
+        if interior is None:
+            owned = np.arange(self.V.dofmap.index_map.size_local, dtype=np.int32)
+            interior = np.setdiff1d(owned, slaves).astype(np.int32)
+        e, i = self._slave_is(k), self._is(interior)
+        K_ee = self._gather_dense(B.createSubMatrix(e, e), k)
+        K_ie = B.createSubMatrix(i, e).convert("dense", out=PETSc.Mat())
+        ksp = make_ksp(B.createSubMatrix(i, i), f"sc_body_{self.name}_condense_", DIRECT)
+        X = K_ie.duplicate()
+        ksp.getPC().getFactorMatrix().matSolve(K_ie, X)
+        coupling = B.createSubMatrix(e, i).matMult(X)
+        return K_ee, self._gather_dense(coupling, k)
+
+    def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
+        start = self.V.dofmap.index_map.local_range[0]
+        return PETSc.IS().createGeneral((start + local).astype(PETSc.IntType), comm=self.comm)
+
+    def _slave_is(self, k: str) -> PETSc.IS:
+        return self._is(self.slaves[k].local_dofs)
+
+    def _gather_dense(self, A: PETSc.Mat, k: str) -> npt.NDArray[np.float64]:
+        """A square matrix on the slaves of k (slave numbering) as a replicated dense array."""
+        dense = A if A.getType().endswith("dense") else A.convert("dense", out=PETSc.Mat())
+        rows = np.concatenate(self.comm.allgather(dense.getDenseArray(readonly=True).copy()))
+        order = self.slaves[k].gathered_master_index
+        result = np.empty_like(rows)
+        result[np.ix_(order, order)] = rows
+        return result
+
+
+def _assemble(form: dolfinx.fem.Form, bcs, *, diagonal: float = 1.0) -> PETSc.Mat:
+    A = dolfinx.fem.petsc.assemble_matrix(form, bcs=bcs, diag=diagonal)
+    A.assemble()
+    return A
+
+
+def dofs_within_layers(
+    V: dolfinx.fem.FunctionSpace, seeds: npt.NDArray[np.int32], layers: int
+) -> npt.NDArray[np.int32]:
+    """Owned DOFs of ``V`` within ``layers`` element layers of the DOFs ``seeds`` (seeds included).
+
+    A layer is every cell that has a marked DOF; its DOFs are marked for the next layer.
+    Parallel-safe: marks cross process boundaries through the index map.
+    """
+    marker = dolfinx.la.vector(V.dofmap.index_map, dtype=np.int32)
+    marker.array[seeds] = 1
+    marker.scatter_forward()
+    cells = V.dofmap.list
+    for _ in range(layers):
+        hit = cells[marker.array[cells].max(axis=1) > 0]
+        marker.array[hit.ravel()] = 1
+        marker.scatter_reverse(dolfinx.la.InsertMode.add)
+        marker.scatter_forward()
+    owned = marker.array[: V.dofmap.index_map.size_local]
+    return np.flatnonzero(owned).astype(np.int32)

@@ -1,0 +1,82 @@
+"""Ready-made verification cases: a problem together with its exact solution."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from subdomain_contact.analytic import TwoPlates
+from subdomain_contact.geometry import Scene, load_scene
+from subdomain_contact.thermal import Temperature, ThermalContact, ThermalMaterial, ThermalProblem
+
+__all__ = ["GEO", "TwoPlatesCase", "two_plates", "two_plates_scene"]
+
+#: The project's geometry folder.
+GEO = Path(__file__).resolve().parent.parent / "geo"
+
+
+@dataclass(frozen=True)
+class TwoPlatesCase:
+    """The two-plate problem of the paper's figure 2 and its closed-form solution."""
+
+    problem: ThermalProblem
+    exact: TwoPlates
+
+    @property
+    def exact_by_body(self) -> dict[str, Callable[[npt.NDArray[np.float64]], np.ndarray]]:
+        """Body name -> exact temperature [K] as a function of node coordinates."""
+        return {
+            "plate_A": lambda x: self.exact.temperature_a(x[:, 0]),
+            "plate_B": lambda x: self.exact.temperature_b(x[:, 0]),
+        }
+
+
+def two_plates_scene(
+    layers: int = 4, rows: int = 4, *, quads: bool = True, comm: MPI.Comm = MPI.COMM_WORLD
+) -> Scene:
+    """``geo/two_plates.geo`` with ``layers`` element layers per plate and ``rows`` along y."""
+    return load_scene(
+        GEO / "two_plates.geo",
+        bodies=["plate_A", "plate_B"],
+        interfaces=["contact"],
+        parameters={"layers": layers, "rows": rows, "quads": int(quads)},
+        comm=comm,
+    )
+
+
+def two_plates(
+    scene: Scene,
+    *,
+    h: float,
+    k_a: float = 1.0,
+    k_b: float = 1.0,
+    source_a: float = 0.0,
+    source_b: float = 0.0,
+    t_left: float = 1.0,
+    t_right: float = 0.0,
+) -> TwoPlatesCase:
+    """Plates of unit length between fixed end temperatures, insulated top and bottom.
+
+    Args:
+        scene: From :func:`two_plates_scene`.
+        h: Contact conductance [W/(m^2 K)].
+        k_a: Conductivity of plate A [W/(m K)].
+        k_b: Conductivity of plate B [W/(m K)].
+        source_a: Volumetric source in plate A [W/m^3].
+        source_b: Volumetric source in plate B [W/m^3].
+        t_left: Temperature [K] at x = 0.
+        t_right: Temperature [K] at x = 2.
+    """
+    problem = ThermalProblem(
+        scene,
+        {"plate_A": ThermalMaterial(k_a, source_a), "plate_B": ThermalMaterial(k_b, source_b)},
+        {"contact": ThermalContact(h)},
+        [Temperature("left", t_left), Temperature("right", t_right)],
+    )
+    exact = TwoPlates(1.0, 1.0, k_a, k_b, h, t_left, t_right, source_a, source_b)
+    return TwoPlatesCase(problem, exact)

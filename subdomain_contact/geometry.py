@@ -1,0 +1,289 @@
+"""Scenes from gmsh ``.geo`` files: one dolfinx mesh per body, one master mesh per contact.
+
+A scene is read from the *named* physical groups of a ``.geo`` file: cell groups are bodies,
+facet groups are contact interfaces (when they lie between two bodies) or boundaries (by name,
+for boundary conditions). Rank 0 meshes the file with gmsh, ``dolfinx.io.gmsh.model_to_mesh``
+distributes the parent mesh, and every body becomes its own submesh. Each interface gets a
+master mesh: a conforming copy of its facets, checked node by node against both bodies' sides.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import dolfinx
+import gmsh
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+__all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_points"]
+
+
+@dataclass(frozen=True)
+class Body:
+    """One body (natural subdomain) with its own mesh.
+
+    Attributes:
+        name: Name of the body's physical group.
+        mesh: The body's mesh (a submesh of the scene's parent mesh).
+        facet_tags: Facet tags of the body mesh, with the parent's physical-group tags.
+        boundaries: Facet group name -> tag, for the groups that have facets on this body.
+    """
+
+    name: str
+    mesh: dolfinx.mesh.Mesh
+    facet_tags: dolfinx.mesh.MeshTags
+    boundaries: Mapping[str, int]
+
+
+@dataclass(frozen=True)
+class Interface:
+    """A contact interface between two bodies and its master mesh.
+
+    Attributes:
+        name: Name of the interface's physical group.
+        bodies: The two bodies it joins, in the order the scene lists them.
+        tag: Its facet tag on both bodies' meshes.
+        master_mesh: The master layer's mesh, of codimension 1, conforming with both sides.
+    """
+
+    name: str
+    bodies: tuple[str, str]
+    tag: int
+    master_mesh: dolfinx.mesh.Mesh
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Bodies and contact interfaces read from one ``.geo`` file."""
+
+    source: Path
+    comm: MPI.Comm
+    bodies: Mapping[str, Body]
+    interfaces: Mapping[str, Interface]
+
+    def interfaces_of(self, body: str) -> list[Interface]:
+        """Interfaces that ``body`` touches, in scene order."""
+        return [i for i in self.interfaces.values() if body in i.bodies]
+
+
+def load_scene(
+    path: str | Path,
+    *,
+    bodies: Sequence[str],
+    interfaces: Sequence[str],
+    parameters: Mapping[str, float] | None = None,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    """Mesh a ``.geo`` file and split it into bodies and master layers.
+
+    Args:
+        path: The ``.geo`` file.
+        bodies: Names of the cell physical groups that are bodies.
+        interfaces: Names of the facet physical groups that are contact interfaces.
+        parameters: Values for the file's ``DefineConstant`` names (as ``gmsh -setnumber``).
+        comm: Communicator over which every body is distributed.
+
+    Raises:
+        ValueError: Unknown parameter, missing group, empty or non-conforming interface, or a
+            file gmsh cannot mesh; the message names the file and the group.
+    """
+    path = Path(path)
+    data = _mesh_geo(path, dict(parameters or {}), comm)
+    parent, groups = data.mesh, data.physical_groups
+    tdim = parent.topology.dim
+    for name in (*bodies, *interfaces):
+        if name not in groups:
+            raise ValueError(
+                f"{path}: no physical group named '{name}'; the file defines {sorted(groups)}"
+            )
+    for name, dim in [(b, tdim) for b in bodies] + [(i, tdim - 1) for i in interfaces]:
+        if groups[name].dim != dim:
+            raise ValueError(
+                f"{path}: physical group '{name}' has dimension {groups[name].dim}, expected {dim}"
+            )
+    facet_groups = {n: g.tag for n, g in groups.items() if g.dim == tdim - 1}
+    body_of_cell = _body_of_cell(data.cell_tags, {b: groups[b].tag for b in bodies}, parent)
+    scene_bodies = {
+        name: _make_body(parent, data, name, groups[name].tag, facet_groups) for name in bodies
+    }
+    scene_interfaces = {}
+    for name in interfaces:
+        scene_interfaces[name] = _make_interface(
+            path, parent, data.facet_tags, name, groups[name].tag, list(bodies), body_of_cell
+        )
+        _check_conforming(path, scene_interfaces[name], scene_bodies)
+    return Scene(path, comm, scene_bodies, scene_interfaces)
+
+
+def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfinx.io.gmsh.MeshData:
+    """Mesh ``path`` with gmsh on rank 0 and distribute it; errors are raised on every rank."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such .geo file")
+    text = path.read_text()
+    for name in parameters:
+        if not re.search(rf"\b{re.escape(name)}\b", text):
+            raise ValueError(f"{path}: parameter '{name}' does not appear in the file")
+    error, dim = None, 0
+    if comm.rank == 0:
+        argv = ["gmsh"]
+        for name, value in parameters.items():
+            argv += ["-setnumber", name, repr(float(value))]
+        gmsh.initialize(argv, interruptible=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        try:
+            gmsh.open(str(path))
+            dim = gmsh.model.getDimension()
+            gmsh.model.mesh.generate(dim)
+            if dim < 2 or not gmsh.model.getPhysicalGroups(dim):
+                error = f"{path}: no {dim}D physical group: name the bodies with Physical groups"
+        except Exception as exc:
+            error = f"{path}: gmsh could not mesh the file: {exc}"
+    error, dim = comm.bcast((error, dim), root=0)
+    if error is not None:
+        if comm.rank == 0:
+            gmsh.finalize()
+        raise ValueError(error)
+    try:
+        model = gmsh.model if comm.rank == 0 else None
+        return dolfinx.io.gmsh.model_to_mesh(model, comm, 0, gdim=dim)
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+
+
+def _body_of_cell(
+    cell_tags: dolfinx.mesh.MeshTags, body_tags: dict[str, int], parent: dolfinx.mesh.Mesh
+) -> npt.NDArray[np.int32]:
+    """Index into the scene's body list of every local cell (-1 where no listed body)."""
+    cells = parent.topology.index_map(parent.topology.dim)
+    owner = np.full(cells.size_local + cells.num_ghosts, -1, dtype=np.int32)
+    for k, tag in enumerate(body_tags.values()):
+        owner[cell_tags.find(tag)] = k
+    return owner
+
+
+def _make_body(
+    parent: dolfinx.mesh.Mesh,
+    data: dolfinx.io.gmsh.MeshData,
+    name: str,
+    tag: int,
+    facet_groups: dict[str, int],
+) -> Body:
+    """Submesh of one body with the parent's facet tags carried over."""
+    tdim = parent.topology.dim
+    mesh, cell_map, vertex_map, _ = dolfinx.mesh.create_submesh(
+        parent, tdim, data.cell_tags.find(tag)
+    )
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    tags = dolfinx.mesh.transfer_meshtags_to_submesh(data.facet_tags, mesh, vertex_map, cell_map)
+    num_owned = mesh.topology.index_map(tdim - 1).size_local
+    present = {}
+    for group, value in facet_groups.items():
+        count = int(np.count_nonzero(tags.find(value) < num_owned))
+        if mesh.comm.allreduce(count, op=MPI.SUM) > 0:
+            present[group] = value
+    return Body(name, mesh, tags, present)
+
+
+def _make_interface(
+    path: Path,
+    parent: dolfinx.mesh.Mesh,
+    facet_tags: dolfinx.mesh.MeshTags,
+    name: str,
+    tag: int,
+    bodies: list[str],
+    body_of_cell: npt.NDArray[np.int32],
+) -> Interface:
+    """Find the two bodies on either side of a facet group and build its master mesh."""
+    tdim = parent.topology.dim
+    parent.topology.create_connectivity(tdim - 1, tdim)
+    f2c = parent.topology.connectivity(tdim - 1, tdim)
+    facets = facet_tags.find(tag)  # local, ghosts included: a rank may see only one side
+    num_owned = int(np.count_nonzero(facets < parent.topology.index_map(tdim - 1).size_local))
+    if parent.comm.allreduce(num_owned, op=MPI.SUM) == 0:
+        raise ValueError(f"{path}: interface '{name}' has no facets")
+    counts = f2c.offsets[facets + 1] - f2c.offsets[facets]
+    starts = np.repeat(f2c.offsets[facets], counts)
+    within = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    side = body_of_cell[f2c.array[starts + within]]  # body index of each (facet, cell) link
+    touched = set().union(*parent.comm.allgather(set(side.tolist())))
+    if -1 in touched:
+        raise ValueError(f"{path}: interface '{name}' touches a cell group that is not a body")
+    if len(touched) != 2:
+        names = [bodies[k] for k in sorted(touched)]
+        raise ValueError(
+            f"{path}: interface '{name}' must lie between exactly two bodies, it touches {names}"
+        )
+    first, second = sorted(touched)
+    # The master mesh copies the first body's side (the whole group when facets are shared).
+    facet_map = parent.topology.index_map(tdim - 1)
+    marker = dolfinx.la.vector(facet_map, dtype=np.int32)  # cells of `first` seen per facet
+    np.add.at(marker.array, np.repeat(facets, counts)[side == first], 1)
+    marker.scatter_reverse(dolfinx.la.InsertMode.add)  # owners learn what ghosts saw
+    on_first = np.flatnonzero(marker.array[: facet_map.size_local]).astype(np.int32)
+    master, *_ = dolfinx.mesh.create_submesh(parent, tdim - 1, on_first)
+    return Interface(name, (bodies[first], bodies[second]), tag, master)
+
+
+def _check_conforming(path: Path, interface: Interface, bodies: Mapping[str, Body]) -> None:
+    """Every node of both sides must sit on a node of the master mesh, one to one."""
+    master = gather_rows(interface.master_mesh.comm, _owned_vertex_coordinates(interface))
+    for body_name in interface.bodies:
+        body = bodies[body_name]
+        fdim = body.mesh.topology.dim - 1
+        facets = body.facet_tags.find(interface.tag)
+        vertices = dolfinx.mesh.compute_incident_entities(body.mesh.topology, facets, fdim, 0)
+        vertices = vertices[vertices < body.mesh.topology.index_map(0).size_local]
+        body.mesh.topology.create_connectivity(0, fdim + 1)
+        nodes = dolfinx.mesh.entities_to_geometry(body.mesh, 0, vertices).ravel()
+        side = gather_rows(body.mesh.comm, body.mesh.geometry.x[nodes])
+        match_points(master, side, what=f"{path}: interface '{interface.name}', body '{body_name}'")
+
+
+def _owned_vertex_coordinates(interface: Interface) -> npt.NDArray[np.float64]:
+    mesh = interface.master_mesh
+    vertices = np.arange(mesh.topology.index_map(0).size_local, dtype=np.int32)
+    mesh.topology.create_connectivity(0, mesh.topology.dim)
+    nodes = dolfinx.mesh.entities_to_geometry(mesh, 0, vertices).ravel()
+    return mesh.geometry.x[nodes]
+
+
+def gather_rows(comm: MPI.Comm, rows: npt.NDArray) -> npt.NDArray:
+    """Concatenate every rank's rows, in rank order, on every rank."""
+    return np.concatenate(comm.allgather(np.asarray(rows)))
+
+
+def match_points(
+    reference: npt.NDArray[np.float64], query: npt.NDArray[np.float64], *, what: str
+) -> npt.NDArray[np.int64]:
+    """Index of the reference point that each query point sits on (a one-to-one match).
+
+    Args:
+        reference: Points, shape ``(n, 3)``.
+        query: Points, shape ``(n, 3)``.
+        what: Names the interface in the error message.
+
+    Raises:
+        ValueError: The two point sets are not the same nodes (a non-conforming interface).
+    """
+    extent = float(np.ptp(reference, axis=0).max()) if len(reference) else 0.0
+    tolerance = 1e-9 * max(extent, 1e-300)
+    distance, index = cKDTree(reference).query(query)
+    if len(query) != len(reference) or len(np.unique(index)) != len(query):
+        raise ValueError(
+            f"{what}: non-conforming interface: {len(query)} nodes on this side, "
+            f"{len(reference)} on the master layer (the sides must share their nodes)"
+        )
+    if len(distance) and distance.max() > tolerance:
+        worst = int(np.argmax(distance))
+        raise ValueError(
+            f"{what}: non-conforming interface: the node at {query[worst]} is "
+            f"{distance[worst]:.3g} away from the nearest master node (tolerance {tolerance:.3g})"
+        )
+    return index

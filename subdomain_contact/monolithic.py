@@ -1,0 +1,103 @@
+"""The monolithic reference: every body and master layer in one system, solved directly.
+
+Unknowns ``[U^α ..., U_m,k ...]``; blocks ``K^α`` (the body matrices of the subdomain solve),
+``−h̄_k M_k P_k`` between a body and a master layer, and ``Σ_α h̄_k P_kᵀ M_k P_k`` on each
+master layer. It is the same discrete system as the subdomain iteration, with the master
+layers merged, so the two must agree to solver precision.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from petsc4py import PETSc
+
+from subdomain_contact.blocks import BodyBlocks
+from subdomain_contact.solvers import DIRECT, make_ksp
+
+__all__ = ["MonolithicResult", "solve_monolithic"]
+
+
+@dataclass
+class MonolithicResult:
+    """Temperatures [K] per body, master values [K] per interface, and the solve time [s]."""
+
+    temperatures: dict[str, npt.NDArray[np.float64]]
+    masters: dict[str, npt.NDArray[np.float64]]
+    seconds: float
+    num_dofs: int
+
+
+def _prolongation(block: BodyBlocks, k: str) -> PETSc.Mat:
+    """``P_k``: body rows × master columns, 1 where a slave DOF sits on a master DOF."""
+    layer = block.layers[k]
+    rows = block.V.dofmap.index_map
+    cols = layer.V.dofmap.index_map
+    P = PETSc.Mat().createAIJ(
+        ((rows.size_local, rows.size_global), (cols.size_local, cols.size_global)),
+        nnz=(1, 1),
+        comm=block.comm,
+    )
+    slaves = block.slaves[k]
+    start = rows.local_range[0]
+    for dof, master in zip(slaves.local_dofs, slaves.master_index, strict=True):
+        P.setValue(start + int(dof), int(master), 1.0)
+    P.assemble()
+    return P
+
+
+def solve_monolithic(
+    blocks: dict[str, BodyBlocks], options: dict[str, str] | None = None
+) -> MonolithicResult:
+    """Assemble the merged system from the bodies' blocks and solve it (MUMPS by default)."""
+    start = time.perf_counter()
+    bodies = list(blocks)
+    interfaces = sorted({k for b in blocks.values() for k in b.layers})
+    n = len(bodies) + len(interfaces)
+    rows: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
+    for a, name in enumerate(bodies):
+        rows[a][a] = blocks[name].A
+    for m, k in enumerate(interfaces, start=len(bodies)):
+        for a, name in enumerate(bodies):
+            block = blocks[name]
+            if k not in block.layers:
+                continue
+            P = _prolongation(block, k)
+            coupling = block.M_bc[k].matMult(P)
+            coupling.scale(-block.half_links[k])
+            rows[a][m], rows[m][a] = coupling, coupling.transpose(PETSc.Mat())
+            diagonal = P.transposeMatMult(block.M_free[k].matMult(P))
+            diagonal.scale(block.half_links[k])
+            rows[m][m] = diagonal if rows[m][m] is None else rows[m][m] + diagonal
+    nest = PETSc.Mat().createNest(rows, comm=blocks[bodies[0]].comm)
+    K = nest.convert("aij", out=PETSc.Mat())
+    ksp = make_ksp(K, "sc_monolithic_", options or DIRECT)
+    b, x = K.createVecs()
+    sizes = [blocks[name].V.dofmap.index_map.size_local for name in bodies]
+    layer_sizes = []
+    for k in interfaces:
+        owner = next(blk for blk in blocks.values() if k in blk.layers)
+        layer_sizes.append(owner.layers[k].V.dofmap.index_map.size_local)
+    b.array[:] = np.concatenate(
+        [blocks[name].b0.array[:s] for name, s in zip(bodies, sizes, strict=True)]
+        + [np.zeros(s) for s in layer_sizes]
+    )
+    ksp.solve(b, x)
+    if ksp.getConvergedReason() < 0:
+        raise RuntimeError(f"monolithic solve failed (reason {ksp.getConvergedReason()})")
+    parts = np.split(x.array, np.cumsum(sizes + layer_sizes)[:-1])
+    temperatures = dict(zip(bodies, parts[: len(bodies)], strict=True))
+    masters = {}
+    for k, part in zip(interfaces, parts[len(bodies) :], strict=True):
+        owner = next(blk for blk in blocks.values() if k in blk.layers)
+        masters[k] = _replicate(owner.layers[k].V, part)
+    return MonolithicResult(temperatures, masters, time.perf_counter() - start, K.getSize()[0])
+
+
+def _replicate(V: dolfinx.fem.FunctionSpace, owned: npt.NDArray[np.float64]) -> np.ndarray:
+    """Owned values of a master space as a replicated vector in global DOF order."""
+    return np.concatenate(V.mesh.comm.allgather(np.asarray(owned)))

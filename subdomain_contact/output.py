@@ -1,0 +1,53 @@
+"""VTK output for ParaView: one file per body and per master layer, fields named with units."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+
+from subdomain_contact.interfaces import MasterLayer
+
+__all__ = ["write_vtk"]
+
+
+def write_vtk(
+    directory: str | Path,
+    temperatures: Mapping[str, dolfinx.fem.Function],
+    layers: Mapping[str, MasterLayer],
+    masters: Mapping[str, npt.NDArray[np.float64]],
+) -> list[Path]:
+    """Write ``<body>.pvd`` per body and ``master_<interface>.pvd`` per master layer.
+
+    Args:
+        directory: Output folder (created).
+        temperatures: Body name -> temperature Function (named with its unit).
+        layers: Interface name -> master layer.
+        masters: Interface name -> replicated master values [K].
+
+    Returns:
+        The ``.pvd`` files written.
+    """
+    directory = Path(directory)
+    written = []
+    for name, T in temperatures.items():
+        written.append(_write(directory / f"{name}.pvd", T))
+    for k, layer in layers.items():
+        T = dolfinx.fem.Function(layer.V, name="temperature [K]")
+        start, end = layer.V.dofmap.index_map.local_range
+        T.x.array[: end - start] = masters[k][start:end]
+        T.x.scatter_forward()
+        written.append(_write(directory / f"master_{k}.pvd", T))
+    return written
+
+
+def _write(path: Path, function: dolfinx.fem.Function) -> Path:
+    if function.function_space.mesh.comm.rank == 0:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    function.function_space.mesh.comm.barrier()
+    with dolfinx.io.VTKFile(function.function_space.mesh.comm, str(path), "w") as vtk:
+        vtk.write_function(function, 0.0)
+    return path
