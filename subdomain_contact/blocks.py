@@ -154,10 +154,6 @@ class BodyBlocks:
             result[k] = self.slaves[k].gather(r.array, layer.size, self.comm)
         return result
 
-    def flux_scale(self) -> float:
-        """Norm [W] of the body's loads and of the solid's reactions in the last solve."""
-        return float(np.hypot(self.F_free.norm(), self.solid_reaction().norm()))
-
     # -- condensed operators (dense, master order, replicated) ----------------------------
     def mass(self, k: str) -> npt.NDArray[np.float64]:
         """Interface mass matrix M of interface k [m^(d-1)], dense, in master order."""

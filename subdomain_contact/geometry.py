@@ -142,6 +142,7 @@ def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfi
             gmsh.model.mesh.generate(dim)
             if dim < 2 or not gmsh.model.getPhysicalGroups(dim):
                 error = f"{path}: no {dim}D physical group: name the bodies with Physical groups"
+            error = error or _stray_facet_group(path, dim)
         except Exception as exc:
             error = f"{path}: gmsh could not mesh the file: {exc}"
     error, dim = comm.bcast((error, dim), root=0)
@@ -155,6 +156,19 @@ def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfi
     finally:
         if comm.rank == 0:
             gmsh.finalize()
+
+
+def _stray_facet_group(path: Path, dim: int) -> str | None:
+    """A facet group with an entity that bounds no cell entity would crash the distribution."""
+    for _, group in gmsh.model.getPhysicalGroups(dim - 1):
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim - 1, group):
+            if len(gmsh.model.getAdjacencies(dim - 1, int(entity))[0]) == 0:
+                name = gmsh.model.getPhysicalName(dim - 1, group)
+                return (
+                    f"{path}: physical group '{name}' has no facets on any body "
+                    f"(its entity {entity} bounds no {dim}D entity)"
+                )
+    return None
 
 
 def _body_of_cell(

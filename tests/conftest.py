@@ -1,0 +1,32 @@
+"""Shared fixtures: every test runs on MPI.COMM_WORLD, serially or under mpiexec."""
+
+import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+import pytest
+from mpi4py import MPI
+
+from subdomain_contact.cases import two_plates_scene
+
+
+@pytest.fixture(scope="session")
+def comm() -> MPI.Comm:
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture(scope="session")
+def plates(comm):
+    """The two plates, 4 element layers each, 4 rows along the contact (quadrilaterals)."""
+    return two_plates_scene(4, 4, comm=comm)
+
+
+@pytest.fixture(scope="session")
+def plates_fine(comm):
+    """The two plates, 8 layers and 6 rows, triangles: a second mesh for the same checks."""
+    return two_plates_scene(8, 6, quads=False, comm=comm)
+
+
+@pytest.fixture
+def shared_tmp(tmp_path, comm):
+    """One temporary folder that every rank agrees on."""
+    from pathlib import Path
+
+    return Path(comm.bcast(str(tmp_path), root=0))

@@ -1,0 +1,37 @@
+"""Every demo runs in its small form, serially and under MPI, and reports sound numbers."""
+
+import json
+import runpy
+import sys
+from pathlib import Path
+
+DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("demo_*.py"))
+CHECKED = {"demo_two_plates"}
+
+
+def test_every_demo_is_checked_here():
+    assert {d.stem for d in DEMOS} == CHECKED
+
+
+def run_demo(path, out, monkeypatch):
+    monkeypatch.setattr(sys, "argv", [str(path), "--small", "--out", str(out)])
+    runpy.run_path(str(path), run_name="__main__")
+
+
+def test_demo_two_plates(shared_tmp, monkeypatch, comm):
+    out = shared_tmp / "out_two_plates"
+    run_demo(DEMOS[[d.stem for d in DEMOS].index("demo_two_plates")], out, monkeypatch)
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    assert [row["iterations"] for row in report["table1"]] == [2, 2]
+    series = [row for row in report["sweep"] if row["corrector"] == "series"]
+    assert len(series) == 6
+    assert all(row["iterations"] <= 2 for row in series)
+    assert all(row["max_error_vs_analytic"] <= 1e-9 for row in series)
+    method1 = {
+        row["h"]: row["iterations"] for row in report["sweep"] if row["corrector"] == "method1"
+    }
+    assert method1[1e-8] <= 3 and method1[1e12] is None
+    assert (out / "iterations_vs_h.png").stat().st_size > 10_000
+    assert (out / "plate_A.pvd").exists() and (out / "master_contact.pvd").exists()
+    assert report["ranks"] == comm.size

@@ -1,0 +1,146 @@
+"""The loader: bodies, master layers and boundary names from .geo files, and its refusals."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import subdomain_contact as sc
+from subdomain_contact.cases import GEO, two_plates
+
+DATA = Path(__file__).parent / "data"
+SPLIT = DATA / "split_plates.geo"
+
+
+def load_split(**parameters):
+    return sc.load_scene(
+        SPLIT, bodies=["left_plate", "right_plate"], interfaces=["contact"], parameters=parameters
+    )
+
+
+def test_two_plates_scene(plates):
+    assert list(plates.bodies) == ["plate_A", "plate_B"]
+    contact = plates.interfaces["contact"]
+    assert contact.bodies == ("plate_A", "plate_B")
+    assert contact.master_mesh.topology.index_map(0).size_global == 5
+    assert contact.master_mesh.topology.index_map(1).size_global == 4
+    assert set(plates.bodies["plate_A"].boundaries) == {"contact", "left", "top", "bottom"}
+    assert set(plates.bodies["plate_B"].boundaries) == {"contact", "right", "top", "bottom"}
+    for body in plates.bodies.values():
+        assert body.mesh.topology.index_map(2).size_global == 16
+
+
+def test_interface_drawn_twice_is_accepted_when_conforming(comm):
+    scene = load_split()
+    problem = sc.ThermalProblem(
+        scene,
+        {"left_plate": sc.ThermalMaterial(1.0), "right_plate": sc.ThermalMaterial(3.0)},
+        {"contact": sc.ThermalContact(2.0)},
+        [sc.Temperature("left", 1.0), sc.Temperature("right", 0.0)],
+    )
+    result = sc.ThermalSubdomains(problem).solve()
+    exact = sc.TwoPlates(1.0, 1.0, 1.0, 3.0, 2.0, 1.0, 0.0)
+    assert np.allclose(result.masters["contact"], exact.temperature_a(1.0) - exact.flux / 4.0)
+
+
+@pytest.mark.parametrize(
+    ("parameters", "message"),
+    [
+        ({"rows_b": 5}, r"split_plates.geo: interface 'contact', body 'right_plate': non-conf"),
+        (
+            {"grading_b": 1.3},
+            r"split_plates.geo: interface 'contact', body 'right_plate': non-conf",
+        ),
+        ({"stray": 1}, r"split_plates.geo: physical group 'stray' has no facets on any body"),
+        ({"rowz": 3}, r"split_plates.geo: parameter 'rowz' does not appear in the file"),
+    ],
+)
+def test_bad_interfaces_are_refused(parameters, message):
+    with pytest.raises(ValueError, match=message):
+        load_split(**parameters)
+
+
+@pytest.mark.parametrize(
+    ("bodies", "interfaces", "message"),
+    [
+        (["plate_A", "plate_C"], ["contact"], r"two_plates.geo: no physical group named 'plate_C'"),
+        (["plate_A", "plate_B"], ["contakt"], r"two_plates.geo: no physical group named 'contakt'"),
+        (["plate_A", "plate_B"], ["left"], r"interface 'left' must lie between exactly two"),
+        (["plate_A", "contact"], [], r"group 'contact' has dimension 1, expected 2"),
+        (["plate_A"], ["contact"], r"interface 'contact' touches a cell group that is not a body"),
+    ],
+)
+def test_missing_or_wrong_groups_are_refused(bodies, interfaces, message):
+    with pytest.raises(ValueError, match=message):
+        sc.load_scene(GEO / "two_plates.geo", bodies=bodies, interfaces=interfaces)
+
+
+def test_unmeshable_file_is_refused():
+    with pytest.raises(ValueError, match=r"broken.geo: gmsh could not mesh the file"):
+        sc.load_scene(DATA / "broken.geo", bodies=["a"], interfaces=[])
+    with pytest.raises(FileNotFoundError, match=r"nowhere.geo"):
+        sc.load_scene(DATA / "nowhere.geo", bodies=["a"], interfaces=[])
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"k_a": -1.0}, r"body 'plate_A': conductivity = -1.0: must be a finite number > 0"),
+        ({"k_b": math.nan}, r"body 'plate_B': conductivity = nan"),
+        ({"source_a": math.inf}, r"body 'plate_A': source = inf: must be a finite number"),
+        ({"h": -2.0}, r"interface 'contact': conductance h = -2.0"),
+        ({"h": math.nan}, r"interface 'contact': conductance h = nan"),
+        ({"h": 1.0, "t_left": math.nan}, r"boundary 'left': value = nan"),
+    ],
+)
+def test_bad_coefficients_are_refused(plates, change, message):
+    arguments = {"h": 1.0, **change}
+    with pytest.raises(ValueError, match=message):
+        two_plates(plates, **arguments)
+
+
+def test_unknown_boundary_is_refused(plates):
+    with pytest.raises(ValueError, match=r"two_plates.geo: no boundary group named 'lefft'"):
+        sc.ThermalProblem(
+            plates,
+            {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
+            {"contact": sc.ThermalContact(1.0)},
+            [sc.Temperature("lefft", 1.0)],
+        )
+
+
+def test_temperature_on_a_contact_is_refused(plates):
+    problem = sc.ThermalProblem(
+        plates,
+        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
+        {"contact": sc.ThermalContact(1.0)},
+        [sc.Temperature("left", 1.0), sc.Temperature("bottom", 0.0)],
+    )
+    with pytest.raises(ValueError, match=r"body 'plate_A': a temperature condition fixes DOFs"):
+        sc.ThermalSubdomains(problem)
+
+
+def test_diverging_iteration_stops_with_its_history(plates):
+    """X far above its 1D-exact value 1.5 over-corrects: the loop must stop, not return."""
+    case = two_plates(plates, h=1e6)
+    solver = sc.ThermalSubdomains(case.problem, sc.PartialCondensation(layers=1, factor=1.95))
+    with pytest.raises(
+        sc.SubdomainConvergenceError, match=r"partial: the subdomain iteration diverged"
+    ) as failure:
+        solver.solve(rtol=1e-10, max_rounds=200)
+    history = failure.value.result.history
+    assert history[-1] > 1e6 * history[0] and len(history) < 200
+    assert (
+        failure.value.result.temperatures["plate_A"].function_space.dofmap.index_map.size_global
+        == 25
+    )
+
+
+def test_stalled_iteration_stops_with_its_history(plates):
+    case = two_plates(plates, h=1e6)
+    solver = sc.ThermalSubdomains(case.problem, sc.Method1())
+    with pytest.raises(
+        sc.SubdomainConvergenceError, match=r"method1: no convergence to 1e-10 in 5 rounds"
+    ):
+        solver.solve(rtol=1e-10, max_rounds=5)

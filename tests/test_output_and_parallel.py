@@ -1,0 +1,62 @@
+"""VTK output reads back; a distributed solve equals the serial one."""
+
+import numpy as np
+import pytest
+import pyvista
+from mpi4py import MPI
+
+import subdomain_contact as sc
+from subdomain_contact.cases import two_plates, two_plates_scene
+from subdomain_contact.geometry import gather_rows, match_points
+
+
+def test_vtk_reads_back_with_units(plates, shared_tmp, comm):
+    case = two_plates(plates, h=3.0, source_a=2.0)
+    solver = sc.ThermalSubdomains(case.problem)
+    result = solver.solve()
+    files = sc.write_vtk(shared_tmp, result.temperatures, solver.layers, result.masters)
+    assert [f.name for f in files] == ["plate_A.pvd", "plate_B.pvd", "master_contact.pvd"]
+    comm.barrier()
+    if comm.rank == 0:
+        for name, expected in [
+            ("plate_A", case.exact.temperature_a),
+            ("plate_B", case.exact.temperature_b),
+        ]:
+            grid = pyvista.get_reader(str(shared_tmp / f"{name}.pvd")).read().combine()
+            values = grid.point_data["temperature [K]"]
+            assert np.allclose(values, expected(grid.points[:, 0]), atol=1e-10)
+        master = pyvista.get_reader(str(shared_tmp / "master_contact.pvd")).read().combine()
+        assert master.n_points == 5 * comm.size or master.n_points >= 5
+        jump = case.exact.temperature_a(1.0) - case.exact.flux / (2 * 3.0)  # q = h̄ (T_A − T_m)
+        assert np.allclose(master.point_data["temperature [K]"], jump, atol=1e-10)
+
+
+def gathered(V, values):
+    n = V.dofmap.index_map.size_local
+    comm = V.mesh.comm
+    return gather_rows(comm, V.tabulate_dof_coordinates()[:n]), gather_rows(comm, values[:n])
+
+
+@pytest.mark.parametrize("corrector", [sc.Series(), sc.Method2(), sc.Method1()])
+def test_distributed_equals_serial(comm, corrector):
+    """Every body spread over all ranks gives the serial numbers to 1e-12."""
+    h = 0.05 if corrector.name == "method1" else 1e4
+    results = {}
+    for label, c in [("world", comm), ("self", MPI.COMM_SELF)]:
+        k_b = 7.0 if corrector.name == "series" else 1.0  # β = ½ suits identical plates
+        case = two_plates(two_plates_scene(6, 5, comm=c), h=h, k_b=k_b, source_a=4.0)
+        solver = sc.ThermalSubdomains(case.problem, corrector)
+        result = solver.solve(rtol=1e-12)
+        results[label] = (solver, result)
+    (world, r_world), (serial, r_serial) = results["world"], results["self"]
+    assert r_world.rounds == r_serial.rounds
+    for name in ("plate_A", "plate_B"):
+        x_w, u_w = gathered(world.blocks[name].V, r_world.temperatures[name].x.array)
+        x_s, u_s = gathered(serial.blocks[name].V, r_serial.temperatures[name].x.array)
+        order = match_points(x_s, x_w, what=name)
+        assert np.abs(u_w - u_s[order]).max() <= 1e-12 * np.abs(u_s).max()
+    m_w, m_s = r_world.masters["contact"], r_serial.masters["contact"]
+    order = match_points(
+        serial.layers["contact"].coordinates, world.layers["contact"].coordinates, what="m"
+    )
+    assert np.abs(m_w - m_s[order]).max() <= 1e-12 * np.abs(m_s).max()
