@@ -24,7 +24,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.interfaces import MasterLayer, slave_map
-from subdomain_contact.solvers import DIRECT, make_ksp
+from subdomain_contact.solvers import DIRECT, Reaper, destroy, make_ksp
 from subdomain_contact.thermal import BodyForms
 
 __all__ = ["BodyBlocks"]
@@ -60,6 +60,7 @@ class BodyBlocks:
         self.a_body = dolfinx.fem.form(self._solid_plus_links(list(layers)))
         self.A = _assemble(self.a_body, forms.bcs)
         self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT)
+        self._ticket = Reaper.register(self.ksp)
         self.K_free = _assemble(dolfinx.fem.form(forms.solid), [])
         load = dolfinx.fem.form(forms.load)
         self.F_free = dolfinx.fem.petsc.assemble_vector(load)
@@ -77,7 +78,25 @@ class BodyBlocks:
             for k in layers
         }
         self.T = dolfinx.fem.Function(self.V, name="temperature [K]")
-        self._rhs, self._tmp, self._slave = (self.A.createVecLeft() for _ in range(3))
+        self._rhs, self._tmp, self._slave, self._reaction, self._gap = (
+            self.A.createVecLeft() for _ in range(5)
+        )
+        self._links = {k: self.A.createVecLeft() for k in layers}
+
+    def __del__(self) -> None:
+        """Destroy the PETSc objects now; the factorisation is left to :class:`Reaper`.
+
+        Left to the garbage collector, parallel PETSc objects wait on a garbage list and hold
+        MPI communicators: a long sweep then runs out of communicators.
+        """
+        if "_links" not in self.__dict__:  # __init__ failed: petsc4py's own garbage handles it
+            return
+        Reaper.release(self._ticket)
+        destroy(
+            self.A, self.K_free, self.F_free, self.b0, *self.M_bc.values(),
+            *self.M_free.values(), self._rhs, self._tmp, self._slave, self._reaction,
+            self._gap, *self._links.values(),
+        )  # fmt: skip
 
     def _solid_plus_links(self, interfaces: list[str]) -> ufl.Form:
         """The solid's form plus the half-links of ``interfaces``."""
@@ -121,10 +140,9 @@ class BodyBlocks:
 
     def solid_reaction(self) -> PETSc.Vec:
         """``K^S U − F`` [W] of the last solve: fluxes the solid takes from supports and links."""
-        reaction = self.A.createVecLeft()
-        self.K_free.mult(self.T.x.petsc_vec, reaction)
-        reaction.axpy(-1.0, self.F_free)
-        return reaction
+        self.K_free.mult(self.T.x.petsc_vec, self._reaction)
+        self._reaction.axpy(-1.0, self.F_free)
+        return self._reaction
 
     def residuals(self, master: MasterValues) -> dict[str, npt.NDArray[np.float64]]:
         """Master residual r_k [W] of each interface, replicated, from the last solve.
@@ -133,32 +151,32 @@ class BodyBlocks:
         (h̄M larger than the solid's stiffness) the solid's reaction on the slaves; for a soft
         link ``−h̄_k M_k (U − P_k U_m,k)``, whose round-off scales with h̄ instead of k.
         """
-        links = {}
         for k, hbar in self.half_links.items():
-            gap = self.T.x.petsc_vec.copy()
-            gap.axpy(-1.0, self._on_slaves(k, master[k]))
-            links[k] = self.A.createVecLeft()
-            self.M_free[k].mult(gap, links[k])
-            links[k].scale(hbar)
+            self.T.x.petsc_vec.copy(self._gap)
+            self._gap.axpy(-1.0, self._on_slaves(k, master[k]))
+            self.M_free[k].mult(self._gap, self._links[k])
+            self._links[k].scale(hbar)
         reaction = self.solid_reaction()
         result = {}
         for k, layer in self.layers.items():
             if self._soft[k]:
-                r = links[k].copy()
-                r.scale(-1.0)
+                r = -self._links[k].array
             else:  # other half-links count where two contacts share slave DOFs
-                r = reaction.copy()
-                for j, link in links.items():
+                r = reaction.array.copy()
+                for j, link in self._links.items():
                     if j != k:
-                        r.axpy(1.0, link)
-            result[k] = self.slaves[k].gather(r.array, layer.size, self.comm)
+                        r += link.array
+            result[k] = self.slaves[k].gather(r, layer.size, self.comm)
         return result
 
     # -- condensed operators (dense, master order, replicated) ----------------------------
     def mass(self, k: str) -> npt.NDArray[np.float64]:
         """Interface mass matrix M of interface k [m^(d-1)], dense, in master order."""
         slaves = self._slave_is(k)
-        return self._gather_dense(self.M_free[k].createSubMatrix(slaves, slaves), k)
+        block = self.M_free[k].createSubMatrix(slaves, slaves)
+        result = self._gather_dense(block, k)
+        destroy(slaves, block)
+        return result
 
     def condensed(
         self, k: str, interior: npt.NDArray[np.int32] | None = None
@@ -182,13 +200,17 @@ class BodyBlocks:
             owned = np.arange(self.V.dofmap.index_map.size_local, dtype=np.int32)
             interior = np.setdiff1d(owned, slaves).astype(np.int32)
         e, i = self._slave_is(k), self._is(interior)
-        K_ee = self._gather_dense(B.createSubMatrix(e, e), k)
-        K_ie = B.createSubMatrix(i, e).convert("dense", out=PETSc.Mat())
-        ksp = make_ksp(B.createSubMatrix(i, i), f"sc_body_{self.name}_condense_", DIRECT)
+        K_ee, K_ie_sparse, K_ii, K_ei = (
+            B.createSubMatrix(*p) for p in [(e, e), (i, e), (i, i), (e, i)]
+        )
+        K_ie = K_ie_sparse.convert("dense", out=PETSc.Mat())
+        ksp = make_ksp(K_ii, f"sc_body_{self.name}_condense_", DIRECT)
         X = K_ie.duplicate()
         ksp.getPC().getFactorMatrix().matSolve(K_ie, X)
-        coupling = B.createSubMatrix(e, i).matMult(X)
-        return K_ee, self._gather_dense(coupling, k)
+        coupling = K_ei.matMult(X)
+        result = self._gather_dense(K_ee, k), self._gather_dense(coupling, k)
+        destroy(B, e, i, K_ee, K_ie_sparse, K_ii, K_ei, K_ie, ksp, X, coupling)
+        return result
 
     def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
         start = self.V.dofmap.index_map.local_range[0]
@@ -199,8 +221,9 @@ class BodyBlocks:
 
     def _gather_dense(self, A: PETSc.Mat, k: str) -> npt.NDArray[np.float64]:
         """A square matrix on the slaves of k (slave numbering) as a replicated dense array."""
-        dense = A if A.getType().endswith("dense") else A.convert("dense", out=PETSc.Mat())
+        dense = A.convert("dense", out=PETSc.Mat())
         rows = np.concatenate(self.comm.allgather(dense.getDenseArray(readonly=True).copy()))
+        dense.destroy()
         order = self.slaves[k].gathered_master_index
         result = np.empty_like(rows)
         result[np.ix_(order, order)] = rows

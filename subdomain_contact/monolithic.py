@@ -17,7 +17,7 @@ import numpy.typing as npt
 from petsc4py import PETSc
 
 from subdomain_contact.blocks import BodyBlocks
-from subdomain_contact.solvers import DIRECT, make_ksp
+from subdomain_contact.solvers import DIRECT, destroy, make_ksp
 
 __all__ = ["MonolithicResult", "solve_monolithic"]
 
@@ -59,6 +59,7 @@ def solve_monolithic(
     interfaces = sorted({k for b in blocks.values() for k in b.layers})
     n = len(bodies) + len(interfaces)
     rows: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
+    made: list[PETSc.Object] = []  # destroyed at the end, collectively
     for a, name in enumerate(bodies):
         rows[a][a] = blocks[name].A
     for m, k in enumerate(interfaces, start=len(bodies)):
@@ -70,9 +71,14 @@ def solve_monolithic(
             coupling = block.M_bc[k].matMult(P)
             coupling.scale(-block.half_links[k])
             rows[a][m], rows[m][a] = coupling, coupling.transpose(PETSc.Mat())
-            diagonal = P.transposeMatMult(block.M_free[k].matMult(P))
+            MP = block.M_free[k].matMult(P)
+            diagonal = P.transposeMatMult(MP)
             diagonal.scale(block.half_links[k])
-            rows[m][m] = diagonal if rows[m][m] is None else rows[m][m] + diagonal
+            made += [P, MP, coupling, rows[m][a], diagonal]
+            if rows[m][m] is None:
+                rows[m][m] = diagonal
+            else:
+                rows[m][m].axpy(1.0, diagonal, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
     nest = PETSc.Mat().createNest(rows, comm=blocks[bodies[0]].comm)
     K = nest.convert("aij", out=PETSc.Mat())
     ksp = make_ksp(K, "sc_monolithic_", options or DIRECT)
@@ -87,15 +93,18 @@ def solve_monolithic(
         + [np.zeros(s) for s in layer_sizes]
     )
     ksp.solve(b, x)
+    size = K.getSize()[0]
     if ksp.getConvergedReason() < 0:
         raise RuntimeError(f"monolithic solve failed (reason {ksp.getConvergedReason()})")
     parts = np.split(x.array, np.cumsum(sizes + layer_sizes)[:-1])
     temperatures = dict(zip(bodies, parts[: len(bodies)], strict=True))
+    temperatures = {name: part.copy() for name, part in temperatures.items()}
     masters = {}
     for k, part in zip(interfaces, parts[len(bodies) :], strict=True):
         owner = next(blk for blk in blocks.values() if k in blk.layers)
         masters[k] = _replicate(owner.layers[k].V, part)
-    return MonolithicResult(temperatures, masters, time.perf_counter() - start, K.getSize()[0])
+    destroy(*made, nest, K, ksp, b, x)
+    return MonolithicResult(temperatures, masters, time.perf_counter() - start, size)
 
 
 def _replicate(V: dolfinx.fem.FunctionSpace, owned: npt.NDArray[np.float64]) -> np.ndarray:

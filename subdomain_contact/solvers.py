@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from types import MappingProxyType
+from typing import ClassVar
 
+from mpi4py import MPI
 from petsc4py import PETSc
 
-__all__ = ["DIRECT", "make_ksp"]
+__all__ = ["DIRECT", "Reaper", "destroy", "make_ksp"]
 
 #: Sparse direct solve by MUMPS (the factorisation is kept and reused).
 DIRECT: Mapping[str, str] = MappingProxyType(
@@ -30,3 +33,48 @@ def make_ksp(A: PETSc.Mat, prefix: str, options: Mapping[str, str]) -> PETSc.KSP
     ksp.setFromOptions()
     ksp.setUp()
     return ksp
+
+
+def destroy(*objects: PETSc.Object | None) -> None:
+    """Destroy PETSc objects at once (collective on their communicators)."""
+    for obj in objects:
+        if obj is not None:
+            obj.destroy()
+
+
+class Reaper:
+    """Destroys factorisations collectively, at points where every rank is, never in ``__del__``.
+
+    Destroying a MUMPS factorisation is collective (MUMPS duplicates a communicator). The
+    garbage collector frees objects caught in reference cycles (an exception's traceback, say)
+    at different moments on different ranks, so a destroy from ``__del__`` can deadlock.
+    Owners ``register`` a factorisation when they make it and ``release`` it from ``__del__``;
+    ``collect`` then destroys, in creation order, those that every holding rank has released.
+    """
+
+    _tickets = itertools.count()
+    _held: ClassVar[dict[int, PETSc.Object]] = {}
+    _released: ClassVar[set[int]] = set()
+
+    @classmethod
+    def register(cls, obj: PETSc.Object) -> int:
+        """Ticket for ``obj``; tickets agree across ranks when objects are made in step."""
+        ticket = next(cls._tickets)
+        cls._held[ticket] = obj
+        return ticket
+
+    @classmethod
+    def release(cls, ticket: int) -> None:
+        """Mark as unused; safe from ``__del__`` (no PETSc or MPI call)."""
+        cls._released.add(ticket)
+
+    @classmethod
+    def collect(cls, comm: MPI.Comm) -> None:
+        """Destroy what every rank of ``comm`` holding it has released (collective on comm)."""
+        views = comm.allgather((set(cls._held), set(cls._released)))
+        ready = set().union(*(released for _, released in views))
+        for held, released in views:
+            ready -= held - released
+        for ticket in sorted(ready & set(cls._held)):
+            cls._held.pop(ticket).destroy()
+            cls._released.discard(ticket)

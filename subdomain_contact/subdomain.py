@@ -19,6 +19,7 @@ import numpy.typing as npt
 from subdomain_contact.blocks import BodyBlocks
 from subdomain_contact.correctors import Corrector, Series
 from subdomain_contact.interfaces import MasterLayer, master_layer
+from subdomain_contact.solvers import Reaper
 from subdomain_contact.thermal import ThermalProblem, body_forms
 
 __all__ = ["SubdomainConvergenceError", "SubdomainResult", "ThermalSubdomains"]
@@ -65,6 +66,7 @@ class ThermalSubdomains:
 
     def __init__(self, problem: ThermalProblem, corrector: Corrector | None = None) -> None:
         start = time.perf_counter()
+        Reaper.collect(problem.scene.comm)
         self.problem = problem
         self.corrector = corrector or Series()
         scene = problem.scene
