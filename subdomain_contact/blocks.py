@@ -123,10 +123,17 @@ class BodyBlocks:
         self.slaves[k].scatter(master, self._slave.array)
         return self._slave
 
-    def solve(self, master: MasterValues) -> dolfinx.fem.Function:
-        """Temperature [K] of the body for given master values [K] of its interfaces."""
+    def solve(self, master: MasterValues, *, homogeneous: bool = False) -> dolfinx.fem.Function:
+        """Temperature [K] of the body for given master values [K] of its interfaces.
+
+        ``homogeneous``: without the body's own loads and conditions, so that the residuals
+        that follow are the interface stiffness applied to ``master`` (``S^α U_m``).
+        """
         b = self._rhs
-        self.b0.copy(b)
+        if homogeneous:
+            b.zeroEntries()
+        else:
+            self.b0.copy(b)
         for k, hbar in self.half_links.items():
             self.M_bc[k].mult(self._on_slaves(k, master[k]), self._tmp)
             b.axpy(hbar, self._tmp)
@@ -138,13 +145,16 @@ class BodyBlocks:
         self.T.x.scatter_forward()
         return self.T
 
-    def solid_reaction(self) -> PETSc.Vec:
+    def solid_reaction(self, *, homogeneous: bool = False) -> PETSc.Vec:
         """``K^S U − F`` [W] of the last solve: fluxes the solid takes from supports and links."""
         self.K_free.mult(self.T.x.petsc_vec, self._reaction)
-        self._reaction.axpy(-1.0, self.F_free)
+        if not homogeneous:
+            self._reaction.axpy(-1.0, self.F_free)
         return self._reaction
 
-    def residuals(self, master: MasterValues) -> dict[str, npt.NDArray[np.float64]]:
+    def residuals(
+        self, master: MasterValues, *, homogeneous: bool = False
+    ) -> dict[str, npt.NDArray[np.float64]]:
         """Master residual r_k [W] of each interface, replicated, from the last solve.
 
         Two equal forms, each exact where the other loses digits: for a stiff link
@@ -156,7 +166,7 @@ class BodyBlocks:
             self._gap.axpy(-1.0, self._on_slaves(k, master[k]))
             self.M_free[k].mult(self._gap, self._links[k])
             self._links[k].scale(hbar)
-        reaction = self.solid_reaction()
+        reaction = self.solid_reaction(homogeneous=homogeneous)
         result = {}
         for k, layer in self.layers.items():
             if self._soft[k]:
@@ -170,6 +180,27 @@ class BodyBlocks:
         return result
 
     # -- condensed operators (dense, master order, replicated) ----------------------------
+    def apply_stiffness(self, master: MasterValues) -> dict[str, npt.NDArray[np.float64]]:
+        """``S^α U_m`` [W]: the body's interface stiffness applied by one homogeneous solve."""
+        self.solve(master, homogeneous=True)
+        return self.residuals(master, homogeneous=True)
+
+    def stiffness(self) -> npt.NDArray[np.float64]:
+        """Dense ``S^α`` [W/K] over all the body's masters (interfaces in ``layers`` order).
+
+        One homogeneous solve per master DOF, each residual in its stable form.
+        """
+        sizes = [layer.size for layer in self.layers.values()]
+        S = np.zeros((sum(sizes), sum(sizes)))
+        unit = np.zeros(sum(sizes))
+        for column in range(sum(sizes)):
+            unit[:] = 0.0
+            unit[column] = 1.0
+            parts = np.split(unit, np.cumsum(sizes)[:-1])
+            response = self.apply_stiffness(dict(zip(self.layers, parts, strict=True)))
+            S[:, column] = np.concatenate([response[k] for k in self.layers])
+        return 0.5 * (S + S.T)
+
     def mass(self, k: str) -> npt.NDArray[np.float64]:
         """Interface mass matrix M of interface k [m^(d-1)], dense, in master order."""
         slaves = self._slave_is(k)
