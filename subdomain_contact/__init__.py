@@ -2,8 +2,9 @@
 
 The package reads as the method does: ``geometry`` (gmsh bodies and master meshes) →
 ``thermal`` (UFL forms) → ``interfaces`` (master layers) → ``blocks`` (a body's slave/master
-blocks and solves) → ``correctors`` and ``subdomain`` (the fixed point) → ``monolithic`` (the
-reference) → ``output`` (VTK). Import ``dolfinx_solver`` before this package.
+blocks and solves) → ``correctors`` and ``subdomain`` (the fixed point), ``krylov`` (every
+interface at once) → ``monolithic`` (the reference) → ``output`` (VTK).
+Import ``dolfinx_solver`` before this package.
 """
 
 import dolfinx_solver  # noqa: F401  (must precede dolfinx and petsc4py)
@@ -17,6 +18,7 @@ from subdomain_contact.correctors import (
     paper_factor,
 )
 from subdomain_contact.geometry import Scene, load_scene
+from subdomain_contact.krylov import KrylovResult, solve_interface_krylov
 from subdomain_contact.monolithic import MonolithicResult, solve_monolithic
 from subdomain_contact.output import write_vtk
 from subdomain_contact.subdomain import (
@@ -36,6 +38,7 @@ from subdomain_contact.thermal import (
 __all__ = [
     "Convection",
     "HeatFlux",
+    "KrylovResult",
     "Method1",
     "Method2",
     "MonolithicResult",
@@ -52,6 +55,7 @@ __all__ = [
     "TwoPlates",
     "load_scene",
     "paper_factor",
+    "solve_interface_krylov",
     "solve_monolithic",
     "write_vtk",
 ]

@@ -231,16 +231,17 @@ class BodyBlocks:
             owned = np.arange(self.V.dofmap.index_map.size_local, dtype=np.int32)
             interior = np.setdiff1d(owned, slaves).astype(np.int32)
         e, i = self._slave_is(k), self._is(interior)
-        K_ee, K_ie_sparse, K_ii, K_ei = (
-            B.createSubMatrix(*p) for p in [(e, e), (i, e), (i, i), (e, i)]
-        )
+        K_ee, K_ie_sparse, K_ii = (B.createSubMatrix(*p) for p in [(e, e), (i, e), (i, i)])
         K_ie = K_ie_sparse.convert("dense", out=PETSc.Mat())
         ksp = make_ksp(K_ii, f"sc_body_{self.name}_condense_", DIRECT)
         X = K_ie.duplicate()
         ksp.getPC().getFactorMatrix().matSolve(K_ie, X)
-        coupling = K_ei.matMult(X)
-        result = self._gather_dense(K_ee, k), self._gather_dense(coupling, k)
-        destroy(B, e, i, K_ee, K_ie_sparse, K_ii, K_ei, K_ie, ksp, X, coupling)
+        # K_ei X = K_ieᵀ X (B is symmetric): local rows, summed over ranks. (PETSc's
+        # MPIAIJ × MPIDense product crashed here when a rank owns none of the slaves.)
+        local = K_ie.getDenseArray(readonly=True).T @ X.getDenseArray(readonly=True)
+        coupling = self._to_master_order(self.comm.allreduce(local, op=MPI.SUM), k)
+        result = self._gather_dense(K_ee, k), coupling
+        destroy(B, e, i, K_ee, K_ie_sparse, K_ii, K_ie, ksp, X)
         return result
 
     def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
@@ -255,9 +256,13 @@ class BodyBlocks:
         dense = A.convert("dense", out=PETSc.Mat())
         rows = np.concatenate(self.comm.allgather(dense.getDenseArray(readonly=True).copy()))
         dense.destroy()
+        return self._to_master_order(rows, k)
+
+    def _to_master_order(self, matrix: npt.NDArray[np.float64], k: str) -> np.ndarray:
+        """Reorder a matrix on the slaves of k from slave numbering to master numbering."""
         order = self.slaves[k].gathered_master_index
-        result = np.empty_like(rows)
-        result[np.ix_(order, order)] = rows
+        result = np.empty_like(matrix)
+        result[np.ix_(order, order)] = matrix
         return result
 
 

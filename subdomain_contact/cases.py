@@ -12,9 +12,15 @@ from mpi4py import MPI
 
 from subdomain_contact.analytic import TwoPlates
 from subdomain_contact.geometry import Scene, load_scene
-from subdomain_contact.thermal import Temperature, ThermalContact, ThermalMaterial, ThermalProblem
+from subdomain_contact.thermal import (
+    Convection,
+    Temperature,
+    ThermalContact,
+    ThermalMaterial,
+    ThermalProblem,
+)
 
-__all__ = ["GEO", "TwoPlatesCase", "two_plates", "two_plates_scene"]
+__all__ = ["GEO", "TwoPlatesCase", "stack", "stack_scene", "two_plates", "two_plates_scene"]
 
 #: The project's geometry folder.
 GEO = Path(__file__).resolve().parent.parent / "geo"
@@ -80,3 +86,35 @@ def two_plates(
     )
     exact = TwoPlates(1.0, 1.0, k_a, k_b, h, t_left, t_right, source_a, source_b)
     return TwoPlatesCase(problem, exact)
+
+
+def stack_scene(
+    bodies: int = 8, layers: int = 2, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORLD
+) -> Scene:
+    """``geo/stack.geo``: ``bodies`` unit squares in a chain, ``layers`` × ``rows`` cells each."""
+    return load_scene(
+        GEO / "stack.geo",
+        bodies=[f"body_{i}" for i in range(bodies)],
+        interfaces=[f"contact_{i}" for i in range(bodies - 1)],
+        parameters={"bodies": bodies, "layers": layers, "rows": rows},
+        comm=comm,
+    )
+
+
+def stack(scene: Scene, *, h: float, cooled: bool = True) -> ThermalProblem:
+    """The chain held at 1 K on its left end, cooled by convection on its right end.
+
+    Conductivities cycle through 1, 10 and 0.1 W/(m K) and every other body has a source of
+    1 W/m^3; every body but the first touches nothing but contacts (and, with ``cooled``, a
+    weak convection of 0.5 W/(m^2 K) to 0.3 K on the top, which makes the field vary along
+    the contacts). Only body 0 has a temperature condition: the others float.
+    """
+    n = len(scene.bodies)
+    materials = {
+        f"body_{i}": ThermalMaterial([1.0, 10.0, 0.1][i % 3], float(i % 2)) for i in range(n)
+    }
+    conditions = [Temperature("left", 1.0), Convection("right", 2.0, 0.0)]
+    if cooled:
+        conditions.append(Convection("top", 0.5, 0.3))
+    contacts = {f"contact_{i}": ThermalContact(h) for i in range(n - 1)}
+    return ThermalProblem(scene, materials, contacts, conditions)

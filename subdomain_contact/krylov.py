@@ -90,12 +90,17 @@ class _InterfaceSystem:
         return result
 
     def _coarse_basis(self) -> npt.NDArray[np.float64]:
-        """One column per body: ½ on the masters of each of its interfaces."""
+        """Orthonormal basis of the body constants: ½ on the masters of each body's interfaces.
+
+        The body vectors are linearly dependent (a chain of n bodies has n − 1 interfaces),
+        so the span is kept, not the vectors.
+        """
         Z = np.zeros((self.size, len(self.sub.blocks)))
         for j, block in enumerate(self.sub.blocks.values()):
             for k in block.layers:
                 Z[self.slices[k], j] = 0.5
-        return Z
+        U, sigma, _ = np.linalg.svd(Z, full_matrices=False)
+        return U[:, sigma > 1e-10 * sigma.max()]
 
     def precondition(self, r: Vector) -> Vector:
         """Per-interface correctors plus the coarse correction (additive, symmetric)."""

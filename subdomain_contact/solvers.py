@@ -36,7 +36,12 @@ def make_ksp(A: PETSc.Mat, prefix: str, options: Mapping[str, str]) -> PETSc.KSP
 
 
 def destroy(*objects: PETSc.Object | None) -> None:
-    """Destroy PETSc objects at once (collective on their communicators)."""
+    """Destroy PETSc objects at once (collective on their communicators).
+
+    Does nothing once PETSc is finalised (at interpreter exit), when petsc4py frees them.
+    """
+    if PETSc.Sys.isFinalized():
+        return
     for obj in objects:
         if obj is not None:
             obj.destroy()
@@ -70,11 +75,21 @@ class Reaper:
 
     @classmethod
     def collect(cls, comm: MPI.Comm) -> None:
-        """Destroy what every rank of ``comm`` holding it has released (collective on comm)."""
-        views = comm.allgather((set(cls._held), set(cls._released)))
+        """Destroy what every rank of ``comm`` holding it has released (collective on comm).
+
+        Only objects whose communicator lies within ``comm`` are considered.
+        """
+        within = {t for t, obj in cls._held.items() if _inside(obj.getComm().tompi4py(), comm)}
+        views = comm.allgather((within, cls._released & within))
         ready = set().union(*(released for _, released in views))
         for held, released in views:
             ready -= held - released
-        for ticket in sorted(ready & set(cls._held)):
+        for ticket in sorted(ready & within):
             cls._held.pop(ticket).destroy()
             cls._released.discard(ticket)
+
+
+def _inside(inner: MPI.Comm, outer: MPI.Comm) -> bool:
+    """Whether every rank of ``inner`` belongs to ``outer``."""
+    ranks = MPI.Group.Translate_ranks(inner.Get_group(), list(range(inner.size)), outer.Get_group())
+    return MPI.UNDEFINED not in ranks

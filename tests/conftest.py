@@ -30,3 +30,14 @@ def shared_tmp(tmp_path, comm):
     from pathlib import Path
 
     return Path(comm.bcast(str(tmp_path), root=0))
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Free what the tests left while MPI and PETSc are still alive, on every rank together."""
+    import gc
+
+    from subdomain_contact.solvers import Reaper
+
+    gc.collect()
+    Reaper.collect(MPI.COMM_WORLD)
+    gc.collect()

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("demo_*.py"))
-CHECKED = {"demo_two_plates"}
+CHECKED = {"demo_two_plates", "demo_stack"}
 
 
 def test_every_demo_is_checked_here():
@@ -18,9 +18,13 @@ def run_demo(path, out, monkeypatch):
     runpy.run_path(str(path), run_name="__main__")
 
 
+def demo(name):
+    return next(d for d in DEMOS if d.stem == name)
+
+
 def test_demo_two_plates(shared_tmp, monkeypatch, comm):
     out = shared_tmp / "out_two_plates"
-    run_demo(DEMOS[[d.stem for d in DEMOS].index("demo_two_plates")], out, monkeypatch)
+    run_demo(demo("demo_two_plates"), out, monkeypatch)
     comm.barrier()
     report = json.loads((out / "report.json").read_text())
     assert [row["iterations"] for row in report["table1"]] == [2, 2]
@@ -35,3 +39,19 @@ def test_demo_two_plates(shared_tmp, monkeypatch, comm):
     assert (out / "iterations_vs_h.png").stat().st_size > 10_000
     assert (out / "plate_A.pvd").exists() and (out / "master_contact.pvd").exists()
     assert report["ranks"] == comm.size
+
+
+def test_demo_stack(shared_tmp, monkeypatch, comm):
+    out = shared_tmp / "out_stack"
+    run_demo(demo("demo_stack"), out, monkeypatch)
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    series = [row for row in report["krylov"] if row["corrector"] == "series"]
+    assert len(series) == 8
+    assert all(row["relative_residual"] <= 1e-10 for row in series)
+    assert all(row["iterations"] <= 15 for row in series)
+    # the monolithic reference itself loses digits as h grows (two-plate demo): judge it at h ≤ 1e4
+    assert all(row["error_vs_monolithic"] <= 1e-9 for row in series if row["h"] <= 1e4)
+    fixed = {(r["h"], r["corrector"]): r["outcome"] for r in report["fixed_point"]}
+    assert fixed[1e-4, "series"] == "converged" and fixed[1e4, "series"] != "converged"
+    assert (out / "iterations.png").exists() and (out / "body_3.pvd").exists()

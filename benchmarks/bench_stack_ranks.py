@@ -1,0 +1,66 @@
+"""Benchmark: the 8-body chain on 1 and 2 ranks, and CG iterations at 3 mesh refinements.
+
+Run: `./dev python benchmarks/bench_stack_ranks.py` (it launches the 1- and 2-rank runs
+itself with the venv's mpiexec). Prints the wall time of each run, the 2-rank / 1-rank
+ratio measured in the same session, and the iterations per refinement. Not a test: timings
+on a shared machine are noisy; compare ratios, not seconds.
+"""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+WORKER = """
+import json, sys, time
+import dolfinx_solver
+from mpi4py import MPI
+import subdomain_contact as sc
+from subdomain_contact.cases import stack, stack_scene
+rows = []
+for refinement in {refinements}:
+    scene = stack_scene(8, 8 * refinement, 8 * refinement)
+    MPI.COMM_WORLD.barrier()
+    tic = time.perf_counter()
+    solver = sc.ThermalSubdomains(stack(scene, h=1e4))
+    result = sc.solve_interface_krylov(solver)
+    seconds = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
+    tic = time.perf_counter()
+    reference = sc.solve_monolithic(solver.blocks)
+    mono = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
+    rows.append(dict(refinement=refinement, dofs=sum(solver.num_dofs.values()),
+                     iterations=sum(result.krylov_iterations), seconds=seconds,
+                     monolithic_seconds=mono))
+if MPI.COMM_WORLD.rank == 0:
+    print("RESULT", json.dumps(rows))
+"""
+
+
+def run(ranks: int, refinements: list[int]) -> list[dict]:
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    code = WORKER.format(refinements=refinements)
+    out = subprocess.run(
+        [str(mpiexec), "-n", str(ranks), sys.executable, "-c", code],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    return json.loads(next(line for line in out.splitlines() if line.startswith("RESULT"))[7:])
+
+
+if __name__ == "__main__":
+    refinements = [1, 2, 4]
+    started = time.perf_counter()
+    one, two = run(1, refinements), run(2, refinements)
+    print(
+        f"{'refinement':>10} {'DOFs':>8} {'CG its':>6} {'1 rank [s]':>11} {'2 ranks [s]':>11}"
+        f" {'2/1':>6} {'mono 1 rank [s]':>15} {'subdomain/mono':>14}"
+    )
+    for a, b in zip(one, two, strict=True):
+        print(
+            f"{a['refinement']:>10} {a['dofs']:>8} {a['iterations']:>6} {a['seconds']:>11.3f}"
+            f" {b['seconds']:>11.3f} {b['seconds'] / a['seconds']:>6.2f}"
+            f" {a['monolithic_seconds']:>15.3f} {a['seconds'] / a['monolithic_seconds']:>14.1f}"
+        )
+    print(f"(total {time.perf_counter() - started:.0f} s)")
