@@ -221,13 +221,7 @@ def _round(
     subdomains: ThermalSubdomains, masters: dict[str, Vector], scales: dict[str, float]
 ) -> Vector:
     """One round of body solves: the summed master residual (concatenated) [W]."""
-    sums = {k: np.zeros(layer.size) for k, layer in subdomains.layers.items()}
-    pushed = dict.fromkeys(sums, 0.0)
-    for block in subdomains.blocks.values():
-        block.solve(masters)
-        for k, r in block.residuals(masters).items():
-            sums[k] += r
-            pushed[k] += float(np.linalg.norm(r))
+    sums, pushed = subdomains.round(masters)
     if not scales:
         scales.update(pushed)
     return np.concatenate([sums[k] for k in subdomains.layers])

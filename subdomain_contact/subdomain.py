@@ -92,6 +92,19 @@ class ThermalSubdomains:
         counts.update({f"master:{k}": layer.size for k, layer in self.layers.items()})
         return counts
 
+    def round(
+        self, masters: dict[str, npt.NDArray[np.float64]]
+    ) -> tuple[dict[str, npt.NDArray[np.float64]], dict[str, float]]:
+        """Solve every body once: per interface, ``Σ_α r^α`` [W] and ``Σ_α ‖r^α‖`` [W]."""
+        sums = {k: np.zeros(layer.size) for k, layer in self.layers.items()}
+        pushed = dict.fromkeys(self.layers, 0.0)
+        for block in self.blocks.values():
+            block.solve(masters)
+            for k, r in block.residuals(masters).items():
+                sums[k] += r
+                pushed[k] += float(np.linalg.norm(r))
+        return sums, pushed
+
     def solve(
         self,
         *,
@@ -120,13 +133,7 @@ class ThermalSubdomains:
         result = SubdomainResult(temperatures, masters, 0)
         scales: dict[str, float] = {}
         for rounds in range(1, max_rounds + 1):
-            sums = {k: np.zeros(layer.size) for k, layer in self.layers.items()}
-            pushed = dict.fromkeys(self.layers, 0.0)
-            for block in self.blocks.values():
-                block.solve(masters)
-                for k, r in block.residuals(masters).items():
-                    sums[k] += r
-                    pushed[k] += float(np.linalg.norm(r))
+            sums, pushed = self.round(masters)
             if rounds == 1:
                 scales = pushed
             relative = max(_relative(np.linalg.norm(sums[k]), scales[k]) for k in sums)
