@@ -56,7 +56,6 @@ class BodyBlocks:
         self.layers = dict(layers)
         self.half_links = {k: float(half_links[k]) for k in layers}
         self.slaves = {k: slave_map(layer, self.V, facet_tags) for k, layer in layers.items()}
-        self._refuse_dirichlet_on_slaves()
         self.a_body = dolfinx.fem.form(self._solid_plus_links(list(layers)))
         self.A = _assemble(self.a_body, forms.bcs)
         self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT)
@@ -70,8 +69,18 @@ class BodyBlocks:
         self.b0.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
         dolfinx.fem.petsc.set_bc(self.b0, forms.bcs)
         mass = {k: dolfinx.fem.form(forms.contact_mass[k]) for k in layers}
-        self.M_bc = {k: _assemble(mass[k], forms.bcs, diagonal=0.0) for k in layers}
         self.M_free = {k: _assemble(mass[k], []) for k in layers}
+        # The coupling to the masters, with the rows of fixed DOFs removed (their equation is
+        # the condition); a fixed slave keeps its master coupling in the residual (link form).
+        fixed = self._fixed_dofs()
+        start = self.V.dofmap.index_map.local_range[0]
+        self.M_rows = {}
+        for k in layers:
+            self.M_rows[k] = self.M_free[k].copy()
+            self.M_rows[k].zeroRows((start + fixed).astype(PETSc.IntType), diag=0.0)
+        self._fixed_slaves = {
+            k: np.flatnonzero(np.isin(self.slaves[k].local_dofs, fixed)) for k in layers
+        }
         stiffness = self.K_free.norm(PETSc.NormType.INFINITY)
         self._soft = {
             k: self.half_links[k] * self.M_free[k].norm(PETSc.NormType.INFINITY) < stiffness
@@ -93,7 +102,7 @@ class BodyBlocks:
             return
         Reaper.release(self._ticket)
         destroy(
-            self.A, self.K_free, self.F_free, self.b0, *self.M_bc.values(),
+            self.A, self.K_free, self.F_free, self.b0, *self.M_rows.values(),
             *self.M_free.values(), self._rhs, self._tmp, self._slave, self._reaction,
             self._gap, *self._links.values(),
         )  # fmt: skip
@@ -105,16 +114,12 @@ class BodyBlocks:
             form = form + self.half_links[k] * self.forms.contact_mass[k]
         return form
 
-    def _refuse_dirichlet_on_slaves(self) -> None:
-        for bc in self.forms.bcs:
-            fixed = bc.dof_indices()[0]
-            for k, slaves in self.slaves.items():
-                clash = np.intersect1d(fixed, slaves.local_dofs).size
-                if self.comm.allreduce(clash, op=MPI.SUM):
-                    raise ValueError(
-                        f"body '{self.name}': a temperature condition fixes DOFs of contact "
-                        f"surface '{k}'; move it off the contact (slave values are unknowns)"
-                    )
+    def _fixed_dofs(self) -> npt.NDArray[np.int32]:
+        """Owned DOFs fixed by temperature conditions (local indices)."""
+        size = self.V.dofmap.index_map.size_local
+        fixed = [bc.dof_indices()[0] for bc in self.forms.bcs]
+        every = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, np.int32)
+        return every[every < size].astype(np.int32)
 
     # -- solves ---------------------------------------------------------------------------
     def _on_slaves(self, k: str, master: npt.NDArray[np.float64]) -> PETSc.Vec:
@@ -135,7 +140,7 @@ class BodyBlocks:
         else:
             self.b0.copy(b)
         for k, hbar in self.half_links.items():
-            self.M_bc[k].mult(self._on_slaves(k, master[k]), self._tmp)
+            self.M_rows[k].mult(self._on_slaves(k, master[k]), self._tmp)
             b.axpy(hbar, self._tmp)
         self.ksp.solve(b, self.T.x.petsc_vec)
         if self.ksp.getConvergedReason() < 0:
@@ -176,6 +181,9 @@ class BodyBlocks:
                 for j, link in self._links.items():
                     if j != k:
                         r += link.array
+                # a fixed slave's reaction includes its support's: take its link there
+                fixed = self.slaves[k].local_dofs[self._fixed_slaves[k]]
+                r[fixed] = -self._links[k].array[fixed]
             result[k] = self.slaves[k].gather(r, layer.size, self.comm)
         return result
 
@@ -240,9 +248,20 @@ class BodyBlocks:
         # MPIAIJ × MPIDense product crashed here when a rank owns none of the slaves.)
         local = K_ie.getDenseArray(readonly=True).T @ X.getDenseArray(readonly=True)
         coupling = self._to_master_order(self.comm.allreduce(local, op=MPI.SUM), k)
-        result = self._gather_dense(K_ee, k), coupling
+        K_ee_dense = self._gather_dense(K_ee, k)
         destroy(B, e, i, K_ee, K_ie_sparse, K_ii, K_ie, ksp, X)
-        return result
+        # A slave fixed by a temperature condition is infinitely stiff, not the unit row the
+        # condition leaves in the matrix.
+        fixed = np.concatenate(
+            self.comm.allgather(self.slaves[k].master_index[self._fixed_slaves[k]])
+        )
+        if fixed.size:
+            stiff = 1e8 * float(np.abs(np.diag(K_ee_dense)).max())
+            for matrix in (K_ee_dense, coupling):
+                matrix[fixed, :] = 0.0
+                matrix[:, fixed] = 0.0
+            K_ee_dense[fixed, fixed] = stiff
+        return K_ee_dense, coupling
 
     def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
         start = self.V.dofmap.index_map.local_range[0]

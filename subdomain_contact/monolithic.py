@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 
 import dolfinx
+import dolfinx.fem.petsc
 import numpy as np
 import numpy.typing as npt
 from petsc4py import PETSc
@@ -60,6 +61,7 @@ def solve_monolithic(
     n = len(bodies) + len(interfaces)
     rows: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
     made: list[PETSc.Object] = []  # destroyed at the end, collectively
+    lifted: dict[int, np.ndarray] = {}  # master right-hand sides from fixed slave DOFs
     for a, name in enumerate(bodies):
         rows[a][a] = blocks[name].A
     for m, k in enumerate(interfaces, start=len(bodies)):
@@ -68,13 +70,14 @@ def solve_monolithic(
             if k not in block.layers:
                 continue
             P = _prolongation(block, k)
-            coupling = block.M_bc[k].matMult(P)
+            coupling = block.M_rows[k].matMult(P)
             coupling.scale(-block.half_links[k])
             rows[a][m], rows[m][a] = coupling, coupling.transpose(PETSc.Mat())
             MP = block.M_free[k].matMult(P)
             diagonal = P.transposeMatMult(MP)
             diagonal.scale(block.half_links[k])
             made += [P, MP, coupling, rows[m][a], diagonal]
+            lifted[m] = lifted.get(m, 0.0) + block.half_links[k] * _fixed_slave_flux(block, k, P)
             if rows[m][m] is None:
                 rows[m][m] = diagonal
             else:
@@ -90,7 +93,10 @@ def solve_monolithic(
         layer_sizes.append(owner.layers[k].V.dofmap.index_map.size_local)
     b.array[:] = np.concatenate(
         [blocks[name].b0.array[:s] for name, s in zip(bodies, sizes, strict=True)]
-        + [np.zeros(s) for s in layer_sizes]
+        + [
+            np.asarray(lifted.get(m, np.zeros(s)))
+            for m, s in enumerate(layer_sizes, start=len(bodies))
+        ]
     )
     ksp.solve(b, x)
     size = K.getSize()[0]
@@ -105,6 +111,18 @@ def solve_monolithic(
         masters[k] = _replicate(owner.layers[k].V, part)
     destroy(*made, nest, K, ksp, b, x)
     return MonolithicResult(temperatures, masters, time.perf_counter() - start, size)
+
+
+def _fixed_slave_flux(block: BodyBlocks, k: str, P: PETSc.Mat) -> np.ndarray:
+    """``P_kᵀ M_k g``: the master rows' share of slave DOFs fixed at g (owned part)."""
+    fixed = block.A.createVecLeft()
+    dolfinx.fem.petsc.set_bc(fixed, block.forms.bcs)
+    on_gamma, result = block.A.createVecLeft(), P.createVecRight()
+    block.M_free[k].mult(fixed, on_gamma)
+    P.multTranspose(on_gamma, result)
+    values = result.array.copy()
+    destroy(fixed, on_gamma, result)
+    return values
 
 
 def _replicate(V: dolfinx.fem.FunctionSpace, owned: npt.NDArray[np.float64]) -> np.ndarray:

@@ -8,6 +8,7 @@ import pytest
 
 import subdomain_contact as sc
 from subdomain_contact.cases import GEO, two_plates
+from subdomain_contact.verification import relative_nodal_error
 
 DATA = Path(__file__).parent / "data"
 SPLIT = DATA / "split_plates.geo"
@@ -110,15 +111,21 @@ def test_unknown_boundary_is_refused(plates):
         )
 
 
-def test_temperature_on_a_contact_is_refused(plates):
+def test_temperature_condition_touching_a_contact(plates):
+    """ "bottom" fixes the end nodes of both sides of the contact: still the monolithic answer."""
     problem = sc.ThermalProblem(
         plates,
-        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
-        {"contact": sc.ThermalContact(1.0)},
+        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(3.0)},
+        {"contact": sc.ThermalContact(2.0)},
         [sc.Temperature("left", 1.0), sc.Temperature("bottom", 0.0)],
     )
-    with pytest.raises(ValueError, match=r"body 'plate_A': a temperature condition fixes DOFs"):
-        sc.ThermalSubdomains(problem)
+    solver = sc.ThermalSubdomains(problem)
+    result = solver.solve(rtol=1e-12)
+    reference = sc.solve_monolithic(solver.blocks)
+    spaces = {n: b.V for n, b in solver.blocks.items()}
+    values = {n: T.x.array for n, T in result.temperatures.items()}
+    assert relative_nodal_error(spaces, values, reference.temperatures) <= 1e-11
+    assert np.allclose(result.masters["contact"], reference.masters["contact"], atol=1e-11)
 
 
 def test_diverging_iteration_stops_with_its_history(plates):

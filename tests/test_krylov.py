@@ -112,3 +112,36 @@ def test_distributed_equals_serial(comm):
         x_s, u_s = V_s.tabulate_dof_coordinates(), r_serial.temperatures[name].x.array
         order = match_points(x_s, x_w, what=name)
         assert np.abs(u_w - u_s[order]).max() <= 1e-12 * np.abs(u_s).max()
+
+
+@pytest.fixture(scope="module")
+def junction(comm):
+    return sc.load_scene(
+        sc.cases.GEO / "junction.geo",
+        bodies=["base", "left", "middle", "right"],
+        interfaces=["base_left", "base_middle", "base_right", "left_middle", "middle_right"],
+        parameters={"cells": 4},
+        comm=comm,
+    )
+
+
+@pytest.mark.parametrize("h", [1e-2, 1.0, 1e4])
+def test_body_touching_three_others_and_triple_points(junction, h):
+    """ "middle" touches base, left and right; three bodies meet at two points; the held
+    top of "middle" fixes slave nodes of two contacts; "left" and "right" float."""
+    conductivities = {"base": 1.0, "left": 5.0, "middle": 0.2, "right": 1.0}
+    problem = sc.ThermalProblem(
+        junction,
+        {b: sc.ThermalMaterial(k) for b, k in conductivities.items()},
+        {k: sc.ThermalContact(h) for k in junction.interfaces},
+        [
+            sc.Temperature("floor", 0.0),
+            sc.Temperature("middle_top", 1.0),
+            sc.Convection("left_top", 1.0, 0.5),
+            sc.HeatFlux("right_top", 2.0),
+        ],
+    )
+    solver = sc.ThermalSubdomains(problem)
+    result = sc.solve_interface_krylov(solver, rtol=1e-10)
+    assert result.history[-1] <= 1e-10
+    assert difference_from_monolithic(solver, result) <= 1e-10
