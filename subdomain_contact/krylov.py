@@ -135,7 +135,7 @@ def solve_interface_krylov(
     subdomains: ThermalSubdomains,
     *,
     rtol: float = 1e-10,
-    dense_limit: int = 400,
+    dense_limit: int = 32,
     coarse: bool = True,
     max_iterations: int = 500,
     max_refinements: int = 5,
@@ -149,6 +149,8 @@ def solve_interface_krylov(
             as in :meth:`ThermalSubdomains.solve`.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body
             solve instead of a dense matrix (memory bound: ``dense_limit²`` per body).
+            Forming ``S^α`` costs one body solve per master DOF, so it pays only when the
+            body has fewer master DOFs than CG needs operator applications (about 20).
         coarse: Add the coarse correction (one unknown per body).
         max_iterations: CG iterations allowed per refinement step.
         max_refinements: Correction steps allowed (the first one usually suffices).
