@@ -32,11 +32,21 @@ Matrix = npt.NDArray[np.float64]
 
 
 class Corrector(Protocol):
-    """Builds the dense operator G of one interface from the blocks of its two bodies."""
+    """Builds the dense operator G of one interface, one body at a time.
+
+    ``part`` runs where the body lives (collective on its communicator) and returns a small
+    dense matrix in master order; ``combine`` runs everywhere on the two parts.
+    """
 
     name: str
 
-    def operator(self, interface: str, first: BodyBlocks, second: BodyBlocks) -> Matrix:
+    def part(self, interface: str, body: BodyBlocks) -> Matrix:
+        """The body's share: its K_C^α, or its S^α [W/K]."""
+        ...
+
+    def combine(
+        self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
+    ) -> Matrix:
         """G such that ΔU_m = −G Σ_α r^α [K/W]."""
         ...
 
@@ -47,38 +57,44 @@ def _inverse(K: Matrix, what: str) -> Matrix:
     return np.linalg.inv(K)
 
 
-def _blend(beta: float, first: Matrix, second: Matrix, what: str) -> Matrix:
+@dataclass(frozen=True, kw_only=True)
+class _Paper:
     """Paper eqs. (5), (7), (8): G = ½ [β K_C^A⁻¹ + (1 − β) K_C^B⁻¹]."""
-    if not 0.0 <= beta <= 1.0:
-        raise ValueError(f"beta = {beta}: must lie in [0, 1]")
-    return 0.5 * (beta * _inverse(first, f"{what} of A") + (1 - beta) * _inverse(second, what))
+
+    beta: float = 0.5
+    name: str = "paper"
+
+    def combine(
+        self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
+    ) -> Matrix:
+        if not 0.0 <= self.beta <= 1.0:
+            raise ValueError(f"beta = {self.beta}: must lie in [0, 1]")
+        inverses = [
+            _inverse(K, f"{self.name}: K_C of body '{b}' on '{interface}'")
+            for K, b in zip(parts, bodies, strict=True)
+        ]
+        return 0.5 * (self.beta * inverses[0] + (1 - self.beta) * inverses[1])
 
 
-@dataclass(frozen=True)
-class Method1:
+@dataclass(frozen=True, kw_only=True)
+class Method1(_Paper):
     """Paper method 1: K_C = K_mm = h̄M; for small h. Contracts by h̄/(h̄ + K̂) in 1D."""
 
-    beta: float = 0.5
     name: str = "method1"
 
-    def operator(self, interface: str, first: BodyBlocks, second: BodyBlocks) -> Matrix:  # noqa: D102
-        K = [b.half_links[interface] * b.mass(interface) for b in (first, second)]
-        return _blend(self.beta, *K, f"h̄M on '{interface}'")
+    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
+        return body.half_links[interface] * body.mass(interface)
 
 
-@dataclass(frozen=True)
-class Method2:
+@dataclass(frozen=True, kw_only=True)
+class Method2(_Paper):
     """Paper method 2: K_C = K̂_ee, full condensation; for large h. Contracts by K̂/(h̄ + K̂)."""
 
-    beta: float = 0.5
     name: str = "method2"
 
-    def operator(self, interface: str, first: BodyBlocks, second: BodyBlocks) -> Matrix:  # noqa: D102
-        K = []
-        for b in (first, second):
-            K_ee, coupling = b.condensed(interface)
-            K.append(K_ee - coupling)
-        return _blend(self.beta, *K, f"K̂_ee on '{interface}'")
+    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
+        K_ee, coupling = body.condensed(interface)
+        return K_ee - coupling
 
 
 def paper_factor(refinement: int, layers: int = 1) -> float:
@@ -86,8 +102,8 @@ def paper_factor(refinement: int, layers: int = 1) -> float:
     return 1.0 + sum(1.0 / (2**k * layers) for k in range(1, refinement + 1))
 
 
-@dataclass(frozen=True)
-class PartialCondensation:
+@dataclass(frozen=True, kw_only=True)
+class PartialCondensation(_Paper):
     """Paper §2: K̂_ee(X) = K_ee − X K_ei K_ii,strip⁻¹ K_ie on ``layers`` element layers.
 
     DOFs beyond the strip are clamped. X corrects the interface mode that is uniform along
@@ -96,19 +112,15 @@ class PartialCondensation:
 
     layers: int = 1
     factor: float = 1.0
-    beta: float = 0.5
     name: str = "partial"
 
-    def operator(self, interface: str, first: BodyBlocks, second: BodyBlocks) -> Matrix:  # noqa: D102
+    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
         if self.layers < 1 or not np.isfinite(self.factor) or self.factor <= 0:
             raise ValueError(f"partial condensation: layers = {self.layers}, X = {self.factor}")
-        K = []
-        for b in (first, second):
-            slaves = b.slaves[interface].local_dofs
-            strip = dofs_within_layers(b.V, slaves, self.layers)
-            K_ee, coupling = b.condensed(interface, np.setdiff1d(strip, slaves).astype(np.int32))
-            K.append(K_ee - self.factor * coupling)
-        return _blend(self.beta, *K, f"K̂_ee(X) on '{interface}'")
+        slaves = body.slaves[interface].local_dofs
+        strip = dofs_within_layers(body.V, slaves, self.layers)
+        K_ee, coupling = body.condensed(interface, np.setdiff1d(strip, slaves).astype(np.int32))
+        return K_ee - self.factor * coupling
 
 
 def series_stiffness(half_link_mass: Matrix, condensed: Matrix) -> Matrix:
@@ -120,15 +132,17 @@ def series_stiffness(half_link_mass: Matrix, condensed: Matrix) -> Matrix:
     return 0.5 * (S + S.T)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Series:
     """Exact corrector of METHOD.md §4: G = (S^A + S^B)⁻¹; one correction for any h."""
 
     name: str = "series"
 
-    def operator(self, interface: str, first: BodyBlocks, second: BodyBlocks) -> Matrix:  # noqa: D102
-        total = np.zeros((first.layers[interface].size,) * 2)
-        for b in (first, second):
-            K_ee, coupling = b.condensed(interface)
-            total += series_stiffness(b.half_links[interface] * b.mass(interface), K_ee - coupling)
-        return _inverse(total, f"S^A + S^B on '{interface}'")
+    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
+        K_ee, coupling = body.condensed(interface)
+        return series_stiffness(body.half_links[interface] * body.mass(interface), K_ee - coupling)
+
+    def combine(  # noqa: D102
+        self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
+    ) -> Matrix:
+        return _inverse(parts[0] + parts[1], f"S^A + S^B on '{interface}'")

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import dolfinx
+import dolfinx.graph
+import dolfinx.io
 import gmsh
 import numpy as np
 import numpy.typing as npt
@@ -60,16 +62,40 @@ class Interface:
 
 @dataclass(frozen=True)
 class Scene:
-    """Bodies and contact interfaces read from one ``.geo`` file."""
+    """Bodies and contact interfaces read from one ``.geo`` file.
+
+    Attributes:
+        source: The ``.geo`` file.
+        comm: Communicator of the whole scene.
+        bodies: Every body; those of other rank groups as serial copies (names, boundaries).
+        interfaces: Every interface.
+        owner: Body name -> index of the rank group that solves it.
+        group: This rank's group index.
+        group_comm: Communicator of this rank's group.
+        group_roots: Rank (in ``comm``) of each group's first rank.
+    """
 
     source: Path
     comm: MPI.Comm
     bodies: Mapping[str, Body]
     interfaces: Mapping[str, Interface]
+    owner: Mapping[str, int]
+    group: int
+    group_comm: MPI.Comm
+    group_roots: tuple[int, ...]
 
     def interfaces_of(self, body: str) -> list[Interface]:
         """Interfaces that ``body`` touches, in scene order."""
         return [i for i in self.interfaces.values() if body in i.bodies]
+
+    def is_local(self, body: str) -> bool:
+        """Whether this rank's group solves ``body``."""
+        return self.owner[body] == self.group
+
+    @property
+    def shared(self) -> bool:
+        """Whether every body is spread over all ranks (one group)."""
+        return len(self.group_roots) == 1
 
 
 def load_scene(
@@ -79,6 +105,7 @@ def load_scene(
     interfaces: Sequence[str],
     parameters: Mapping[str, float] | None = None,
     comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
 ) -> Scene:
     """Mesh a ``.geo`` file and split it into bodies and master layers.
 
@@ -87,13 +114,31 @@ def load_scene(
         bodies: Names of the cell physical groups that are bodies.
         interfaces: Names of the facet physical groups that are contact interfaces.
         parameters: Values for the file's ``DefineConstant`` names (as ``gmsh -setnumber``).
-        comm: Communicator over which every body is distributed.
+        comm: Communicator of the scene.
+        placement: ``"shared"``: every body spread over all ranks of ``comm``.
+            ``"groups"``: ranks split into groups, each body solved by one group (one body
+            per group when there are enough ranks, in proportion to their cells; several
+            bodies per rank otherwise). Every rank meshes the file and keeps the master
+            layers; a group distributes only its own bodies.
 
     Raises:
         ValueError: Unknown parameter, missing group, empty or non-conforming interface, or a
             file gmsh cannot mesh; the message names the file and the group.
     """
     path = Path(path)
+    if placement == "groups" and comm.size > 1:
+        return _grouped(
+            load_scene(
+                path,
+                bodies=bodies,
+                interfaces=interfaces,
+                parameters=parameters,
+                comm=MPI.COMM_SELF,
+            ),
+            comm,
+        )
+    if placement not in ("shared", "groups"):
+        raise ValueError(f"placement = {placement!r}: use 'shared' or 'groups'")
     data = _mesh_geo(path, dict(parameters or {}), comm)
     parent, groups = data.mesh, data.physical_groups
     tdim = parent.topology.dim
@@ -118,7 +163,66 @@ def load_scene(
             path, parent, data.facet_tags, name, groups[name].tag, list(bodies), body_of_cell
         )
         _check_conforming(path, scene_interfaces[name], scene_bodies)
-    return Scene(path, comm, scene_bodies, scene_interfaces)
+    owner = dict.fromkeys(scene_bodies, 0)
+    return Scene(path, comm, scene_bodies, scene_interfaces, owner, 0, comm, (0,))
+
+
+def _grouped(serial: Scene, comm: MPI.Comm) -> Scene:
+    """Place the bodies of a serial scene (on every rank) on rank groups of ``comm``."""
+    cells = {
+        n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
+        for n, b in serial.bodies.items()
+    }
+    owner, group_of_rank = _place(cells, comm.size)
+    group = group_of_rank[comm.rank]
+    group_comm = comm.Split(group, comm.rank)
+    roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
+    bodies = {
+        name: _distribute(body, group_comm) if owner[name] == group else body
+        for name, body in serial.bodies.items()
+    }
+    return Scene(serial.source, comm, bodies, serial.interfaces, owner, group, group_comm, roots)
+
+
+def _place(cells: dict[str, int], ranks: int) -> tuple[dict[str, int], list[int]]:
+    """Body -> group, and rank -> group: groups sized by cells, or bodies packed on ranks."""
+    names = sorted(cells, key=lambda n: -cells[n])
+    if ranks >= len(cells):
+        share = dict.fromkeys(names, 1)
+        for _ in range(ranks - len(names)):
+            share[max(names, key=lambda n: cells[n] / share[n])] += 1
+        order = list(cells)  # groups in scene order, consecutive ranks
+        owner = {n: g for g, n in enumerate(order)}
+        return owner, [owner[n] for n in order for _ in range(share[n])]
+    load = [0] * ranks
+    owner = {}
+    for name in names:
+        owner[name] = int(np.argmin(load))
+        load[owner[name]] += cells[name]
+    return owner, list(range(ranks))
+
+
+def _distribute(body: Body, comm: MPI.Comm) -> Body:
+    """Spread a serial body mesh (the same on every rank) over ``comm``, facet tags too."""
+    mesh, root = body.mesh, comm.rank == 0
+    gdim, fdim = mesh.geometry.dim, mesh.topology.dim - 1
+    cells = mesh.geometry.dofmaps[0].astype(np.int64)
+    x = mesh.geometry.x[:, :gdim]
+    new = dolfinx.mesh.create_mesh(
+        comm, cells if root else cells[:0], mesh.ufl_domain(), x if root else x[:0]
+    )
+    tags = body.facet_tags
+    mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+    entities = dolfinx.mesh.entities_to_geometry(mesh, fdim, tags.indices).astype(np.int64)
+    values = tags.values
+    local, local_values = dolfinx.io.distribute_entity_data(
+        new, fdim, entities if root else entities[:0], values if root else values[:0]
+    )
+    new.topology.create_connectivity(fdim, new.topology.dim)
+    new_tags = dolfinx.mesh.meshtags_from_entities(
+        new, fdim, dolfinx.graph.adjacencylist(local), local_values.astype(np.int32)
+    )
+    return Body(body.name, new, new_tags, body.boundaries)
 
 
 def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfinx.io.gmsh.MeshData:

@@ -75,19 +75,21 @@ class _InterfaceSystem:
 
     def apply(self, v: Vector) -> Vector:
         """``S v`` [W] for master values v [K]."""
-        parts, result = self.split(v), np.zeros(self.size)
-        for name, block in self.sub.blocks.items():
-            own = [k for k in block.layers]
+        parts = self.split(v)
+        local = {k: np.zeros(s.stop - s.start) for k, s in self.slices.items()}
+        for name, block in self.sub.blocks.items():  # this rank's group's bodies
+            own = list(block.layers)
             if name in self.dense:
                 response = self.dense[name] @ np.concatenate([parts[k] for k in own])
                 pieces = np.split(response, np.cumsum([len(parts[k]) for k in own])[:-1])
                 for k, piece in zip(own, pieces, strict=True):
-                    result[self.slices[k]] += piece
+                    local[k] += piece
             else:
                 for k, r in block.apply_stiffness({k: parts[k] for k in own}).items():
-                    result[self.slices[k]] += r
+                    local[k] += r
         self.applications += 1
-        return result
+        total = self.sub.total(local)
+        return np.concatenate([total[k] for k in self.slices])
 
     def _coarse_basis(self) -> npt.NDArray[np.float64]:
         """Orthonormal basis of the body constants: ½ on the masters of each body's interfaces.
@@ -95,10 +97,11 @@ class _InterfaceSystem:
         The body vectors are linearly dependent (a chain of n bodies has n − 1 interfaces),
         so the span is kept, not the vectors.
         """
-        Z = np.zeros((self.size, len(self.sub.blocks)))
-        for j, block in enumerate(self.sub.blocks.values()):
-            for k in block.layers:
-                Z[self.slices[k], j] = 0.5
+        scene = self.sub.problem.scene
+        Z = np.zeros((self.size, len(scene.bodies)))
+        for j, body in enumerate(scene.bodies):
+            for interface in scene.interfaces_of(body):
+                Z[self.slices[interface.name], j] = 0.5
         U, sigma, _ = np.linalg.svd(Z, full_matrices=False)
         return U[:, sigma > 1e-10 * sigma.max()]
 

@@ -57,6 +57,14 @@ def solve_monolithic(
     """Assemble the merged system from the bodies' blocks and solve it (MUMPS by default)."""
     start = time.perf_counter()
     bodies = list(blocks)
+    neighbours = {
+        n for b in blocks.values() for layer in b.layers.values() for n in layer.interface.bodies
+    }
+    if not neighbours <= set(bodies):
+        raise ValueError(
+            "solve_monolithic: the bodies live on different rank groups; load the scene with "
+            "placement='shared' (or on one rank) for the monolithic reference"
+        )
     interfaces = sorted({k for b in blocks.values() for k in b.layers})
     n = len(bodies) + len(interfaces)
     rows: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]

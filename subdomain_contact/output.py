@@ -8,6 +8,7 @@ from pathlib import Path
 import dolfinx
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 from subdomain_contact.interfaces import MasterLayer
 
@@ -29,7 +30,7 @@ def write_vtk(
         masters: Interface name -> replicated master values [K].
 
     Returns:
-        The ``.pvd`` files written.
+        The ``.pvd`` files written (each body by the ranks that solve it).
     """
     directory = Path(directory)
     written = []
@@ -45,7 +46,10 @@ def write_vtk(
 
 
 def _write(path: Path, function: dolfinx.fem.Function) -> Path:
-    if function.function_space.mesh.comm.rank == 0:
+    comm = function.function_space.mesh.comm
+    if comm.size == 1 and MPI.COMM_WORLD.size > 1 and MPI.COMM_WORLD.rank != 0:
+        return path  # a master layer kept whole on every rank: rank 0 writes it
+    if comm.rank == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
     function.function_space.mesh.comm.barrier()
     with dolfinx.io.VTKFile(function.function_space.mesh.comm, str(path), "w") as vtk:

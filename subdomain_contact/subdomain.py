@@ -32,7 +32,8 @@ class SubdomainResult:
     """Solution of a subdomain solve.
 
     Attributes:
-        temperatures: Body name -> temperature [K] (the body's own Function, updated in place).
+        temperatures: Body name -> temperature [K] (the body's own Function, updated in place),
+            for the bodies that this rank's group solves.
         masters: Interface name -> master temperatures [K], replicated, in master order.
         rounds: Body-solve rounds (the last one is the check that converged).
         history: Largest master residual relative to its interface's flux scale, per round.
@@ -73,22 +74,51 @@ class ThermalSubdomains:
         self.layers: dict[str, MasterLayer] = {
             k: master_layer(i) for k, i in scene.interfaces.items()
         }
-        self.blocks: dict[str, BodyBlocks] = {}
+        self.blocks: dict[str, BodyBlocks] = {}  # the bodies this rank's group solves
         for name, body in scene.bodies.items():
+            if not scene.is_local(name):
+                continue
             mine = {i.name: self.layers[i.name] for i in scene.interfaces_of(name)}
             halves = {k: problem.half_link(k) for k in mine}
             forms = body_forms(problem, body)
             self.blocks[name] = BodyBlocks(name, forms, body.facet_tags, mine, halves)
+        parts = self._everywhere(
+            {
+                (k, name): self.corrector.part(k, block)
+                for name, block in self.blocks.items()
+                for k in block.layers
+            }
+        )
         self.operators = {
-            k: self.corrector.operator(k, *(self.blocks[b] for b in i.bodies))
+            k: self.corrector.combine(k, i.bodies, (parts[k, i.bodies[0]], parts[k, i.bodies[1]]))
             for k, i in scene.interfaces.items()
         }
         self.setup_seconds = time.perf_counter() - start
 
+    def _everywhere(self, local: dict) -> dict:
+        """Merge the groups' dictionaries (computed on their own bodies) on every rank."""
+        scene = self.problem.scene
+        if scene.shared:
+            return local
+        merged: dict = {}
+        for part in scene.comm.allgather(local if scene.group_comm.rank == 0 else {}):
+            merged.update(part)
+        return merged
+
+    def total(self, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Sum per-interface vectors of the local bodies over the groups (each counted once)."""
+        scene = self.problem.scene
+        if scene.shared:
+            return values
+        weight = 1.0 if scene.group_comm.rank == 0 else 0.0
+        return {k: scene.comm.allreduce(weight * v) for k, v in values.items()}
+
     @property
     def num_dofs(self) -> dict[str, int]:
-        """Global DOF count of every body and master layer."""
-        counts = {n: b.V.dofmap.index_map.size_global for n, b in self.blocks.items()}
+        """Global DOF count of every body and master layer (collective)."""
+        counts = self._everywhere(
+            {n: b.V.dofmap.index_map.size_global for n, b in self.blocks.items()}
+        )
         counts.update({f"master:{k}": layer.size for k, layer in self.layers.items()})
         return counts
 
@@ -103,7 +133,8 @@ class ThermalSubdomains:
             for k, r in block.residuals(masters).items():
                 sums[k] += r
                 pushed[k] += float(np.linalg.norm(r))
-        return sums, pushed
+        pushed_total = self.total({k: np.array([v]) for k, v in pushed.items()})
+        return self.total(sums), {k: float(v[0]) for k, v in pushed_total.items()}
 
     def solve(
         self,

@@ -145,3 +145,37 @@ def test_body_touching_three_others_and_triple_points(junction, h):
     result = sc.solve_interface_krylov(solver, rtol=1e-10)
     assert result.history[-1] <= 1e-10
     assert difference_from_monolithic(solver, result) <= 1e-10
+
+
+def test_bodies_on_rank_groups_equal_serial(comm):
+    """placement="groups": each body solved by its own rank group; same numbers as serial."""
+    grouped = stack_scene(8, 3, 3, comm=comm)
+    grouped = sc.load_scene(
+        grouped.source,
+        bodies=list(grouped.bodies),
+        interfaces=list(grouped.interfaces),
+        parameters={"bodies": 8, "layers": 3, "rows": 3},
+        comm=comm,
+        placement="groups",
+    )
+    assert len(grouped.group_roots) == min(comm.size, 8)
+    solver = sc.ThermalSubdomains(stack(grouped, h=100.0))
+    result = sc.solve_interface_krylov(solver, rtol=1e-12)
+    serial = sc.ThermalSubdomains(stack(stack_scene(8, 3, 3, comm=MPI.COMM_SELF), h=100.0))
+    expected = sc.solve_interface_krylov(serial, rtol=1e-12)
+    assert result.krylov_iterations == expected.krylov_iterations
+    worst = 0.0
+    for name, T in result.temperatures.items():
+        V = solver.blocks[name].V
+        n = V.dofmap.index_map.size_local
+        x = gather_rows(V.mesh.comm, V.tabulate_dof_coordinates()[:n])
+        u = gather_rows(V.mesh.comm, T.x.array[:n])
+        V_s = serial.blocks[name].V
+        order = match_points(V_s.tabulate_dof_coordinates(), x, what=name)
+        worst = max(worst, float(np.abs(u - expected.temperatures[name].x.array[order]).max()))
+    assert comm.allreduce(worst, op=MPI.MAX) <= 1e-12
+    for k, values in result.masters.items():
+        assert np.abs(values - expected.masters[k]).max() <= 1e-12
+    if comm.size > 1:
+        with pytest.raises(ValueError, match="different rank groups"):
+            sc.solve_monolithic(solver.blocks)
