@@ -174,10 +174,11 @@ sc.write_vtk(args.out, result.temperatures, solver.layers, result.masters)
 
 if comm.rank == 0:
     figure, axes = plt.subplots(figsize=(7, 4))
-    for corrector in correctors:
+    styles = ["o-", "s--", "^:", "D-"]  # method 2 and partial overlap on this uniform case
+    for corrector, style in zip(correctors, styles, strict=True):
         rows = [r for r in sweep if r["corrector"] == corrector.name]
         rounds = [np.nan if r["iterations"] is None else r["iterations"] for r in rows]
-        axes.semilogx([r["h"] for r in rows], rounds, "o-", label=corrector.name)
+        axes.semilogx([r["h"] for r in rows], rounds, style, label=corrector.name, fillstyle="none")
     axes.set_xlabel("contact conductance h [W/(m² K)]")
     axes.set_ylabel("rounds to 1e-10 (gaps: > 100)")
     axes.set_yscale("log")
