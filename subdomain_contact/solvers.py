@@ -91,5 +91,8 @@ class Reaper:
 
 def _inside(inner: MPI.Comm, outer: MPI.Comm) -> bool:
     """Whether every rank of ``inner`` belongs to ``outer``."""
-    ranks = MPI.Group.Translate_ranks(inner.Get_group(), list(range(inner.size)), outer.Get_group())
+    inner_group, outer_group = inner.Get_group(), outer.Get_group()
+    ranks = MPI.Group.Translate_ranks(inner_group, list(range(inner.size)), outer_group)
+    inner_group.Free()
+    outer_group.Free()
     return MPI.UNDEFINED not in ranks
