@@ -86,6 +86,13 @@ class BodyBlocks:
             k: self.half_links[k] * self.M_free[k].norm(PETSc.NormType.INFINITY) < stiffness
             for k in layers
         }
+        # the link form is needed for soft links, for fixed slaves, and where contacts meet
+        self._link_used = {
+            k: self._soft[k]
+            or len(layers) > 1
+            or self.comm.allreduce(self._fixed_slaves[k].size, op=MPI.SUM) > 0
+            for k in layers
+        }
         self.T = dolfinx.fem.Function(self.V, name="temperature [K]")
         self._rhs, self._tmp, self._slave, self._reaction, self._gap = (
             self.A.createVecLeft() for _ in range(5)
@@ -167,6 +174,8 @@ class BodyBlocks:
         link ``−h̄_k M_k (U − P_k U_m,k)``, whose round-off scales with h̄ instead of k.
         """
         for k, hbar in self.half_links.items():
+            if not self._link_used[k]:
+                continue
             self.T.x.petsc_vec.copy(self._gap)
             self._gap.axpy(-1.0, self._on_slaves(k, master[k]))
             self.M_free[k].mult(self._gap, self._links[k])

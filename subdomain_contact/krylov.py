@@ -29,6 +29,7 @@ from subdomain_contact.subdomain import (
     SubdomainConvergenceError,
     SubdomainResult,
     ThermalSubdomains,
+    relative_to_scale,
 )
 
 __all__ = ["KrylovResult", "solve_interface_krylov"]
@@ -185,7 +186,7 @@ def solve_interface_krylov(
             residual = _round(subdomains, masters, scales)
             result.rounds += 1
             relative = max(
-                np.linalg.norm(residual[s]) / scales[k] if scales[k] > 0 else 0.0
+                relative_to_scale(float(np.linalg.norm(residual[s])), scales[k])
                 for k, s in system.slices.items()
             )
             result.history.append(float(relative))

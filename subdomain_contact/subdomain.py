@@ -22,7 +22,12 @@ from subdomain_contact.interfaces import MasterLayer, master_layer
 from subdomain_contact.solvers import Reaper
 from subdomain_contact.thermal import ThermalProblem, body_forms
 
-__all__ = ["SubdomainConvergenceError", "SubdomainResult", "ThermalSubdomains"]
+__all__ = [
+    "SubdomainConvergenceError",
+    "SubdomainResult",
+    "ThermalSubdomains",
+    "relative_to_scale",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -167,7 +172,7 @@ class ThermalSubdomains:
             sums, pushed = self.round(masters)
             if rounds == 1:
                 scales = pushed
-            relative = max(_relative(np.linalg.norm(sums[k]), scales[k]) for k in sums)
+            relative = max(relative_to_scale(np.linalg.norm(sums[k]), scales[k]) for k in sums)
             result.rounds, result.seconds = rounds, time.perf_counter() - start
             result.history.append(relative)
             logger.info("round %d: relative master residual %.3e", rounds, relative)
@@ -188,7 +193,8 @@ class ThermalSubdomains:
         )
 
 
-def _relative(norm: float, scale: float) -> float:
+def relative_to_scale(norm: float, scale: float) -> float:
+    """``norm / scale``, or ``norm`` itself where nothing flowed (scale 0)."""
     return float(norm / scale) if scale > 0 else float(norm)
 
 
