@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["TwoPlates"]
+__all__ = ["BlocksBetweenWalls", "JouleBars", "TwoPlates"]
 
 
 @dataclass(frozen=True)
@@ -16,7 +16,8 @@ class TwoPlates:
 
     Plate A spans ``0 ≤ x ≤ length_a``, plate B ``length_a ≤ x ≤ length_a + length_b``;
     ``T(0) = t_left``, ``T(end) = t_right``; constant sources; the contact at ``x = length_a``
-    passes ``q = h (T_A − T_B)``. The exact solution is piecewise quadratic with a jump q/h.
+    passes ``q = h (T_A − T_B)`` and releases ``contact_heat`` [W/m^2], half into each plate
+    (the half-links' Joule heat). The exact solution is piecewise quadratic with a jump q/h.
     Units: m, W/(m K), W/m^3, K, W/(m^2 K).
     """
 
@@ -29,6 +30,7 @@ class TwoPlates:
     t_right: float
     source_a: float = 0.0
     source_b: float = 0.0
+    contact_heat: float = 0.0
 
     @property
     def flux(self) -> float:
@@ -39,19 +41,116 @@ class TwoPlates:
             + self.source_a * self.length_a**2 / (2 * self.k_a)
             - self.source_b * self.length_b**2 / (2 * self.k_b)
         )
+        drive += self.contact_heat / 2 * (self.length_a / self.k_a - self.length_b / self.k_b)
         return drive / (self.length_a / self.k_a + 1 / self.h + self.length_b / self.k_b)
 
     def temperature_a(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Temperature [K] in plate A at abscissae x [m]."""
-        slope = (self.source_a * self.length_a - self.flux) / self.k_a
+        slope = (self.source_a * self.length_a - self.flux + self.contact_heat / 2) / self.k_a
         return self.t_left + slope * x - self.source_a * x**2 / (2 * self.k_a)
 
     def temperature_b(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Temperature [K] in plate B at abscissae x [m]."""
         s = x - self.length_a
+        leaving = self.flux + self.contact_heat / 2  # into B at the contact
         start = (
             self.t_right
-            + self.flux * self.length_b / self.k_b
+            + leaving * self.length_b / self.k_b
             + self.source_b * self.length_b**2 / (2 * self.k_b)
         )
-        return start - self.flux / self.k_b * s - self.source_b * s**2 / (2 * self.k_b)
+        return start - leaving / self.k_b * s - self.source_b * s**2 / (2 * self.k_b)
+
+
+@dataclass(frozen=True)
+class JouleBars:
+    """Steady 1D current and heat through two bars in series and their contact.
+
+    Bar A spans ``0 ≤ x ≤ length_a``, bar B the next ``length_b``; potential ``voltage`` at
+    x = 0 and 0 at the far end; temperatures ``t_left`` and ``t_right`` there. Constant
+    conductivities k [W/(m K)], σ [S/m] and contact conductances h [W/(m^2 K)], g [S/m^2].
+    The potential is piecewise linear with a jump j/g; Joule heat j²/σ warms the bars and
+    j²/g the contact (half into each side).
+    """
+
+    length_a: float
+    length_b: float
+    k_a: float
+    k_b: float
+    sigma_a: float
+    sigma_b: float
+    h: float
+    g: float
+    voltage: float
+    t_left: float
+    t_right: float
+
+    @property
+    def current_density(self) -> float:
+        """Current density j [A/m^2] in +x."""
+        return self.voltage / (
+            self.length_a / self.sigma_a + 1 / self.g + self.length_b / self.sigma_b
+        )
+
+    def potential_a(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Potential [V] in bar A."""
+        return self.voltage - self.current_density * x / self.sigma_a
+
+    def potential_b(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Potential [V] in bar B."""
+        end = self.length_a + self.length_b
+        return self.current_density * (end - x) / self.sigma_b
+
+    @property
+    def thermal(self) -> TwoPlates:
+        """The heat problem, with the Joule heat as its sources."""
+        j2 = self.current_density**2
+        return TwoPlates(
+            self.length_a, self.length_b, self.k_a, self.k_b, self.h, self.t_left,
+            self.t_right, j2 / self.sigma_a, j2 / self.sigma_b, j2 / self.g,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BlocksBetweenWalls:
+    """Two blocks in a row between fixed walls, uniformly heated, in plane strain.
+
+    Each block may expand freely across (traction-free top, rollers at the bottom), so the
+    stress is uniaxial, σ_xx = −p, and its strain ε_xx = −p (1 − ν²)/E + (1 + ν) α ΔT. The
+    contact between the blocks has an initial gap and a penalty law p = k_n ⟨closure − gap⟩;
+    an open contact keeps the tension stiffness ``open_stiffness`` k_n (see
+    :class:`~subdomain_contact.multiphysics.Contact`). Units: m, Pa, 1/K, K, Pa/m.
+    """
+
+    lengths: tuple[float, float]
+    young: tuple[float, float]
+    poisson: tuple[float, float]
+    expansion: tuple[float, float]
+    gap: float
+    stiffness: float
+    open_stiffness: float = 1e-9
+
+    def free_closure(self, heating: float) -> float:
+        """Closure [m] the blocks would make without contact, heated by ``heating`` [K]."""
+        return sum(
+            L * (1 + nu) * a * heating
+            for L, nu, a in zip(self.lengths, self.poisson, self.expansion, strict=True)
+        )
+
+    def _traction(self, heating: float, stiffness: float) -> float:
+        compliance = sum(
+            L * (1 - nu**2) / E
+            for L, nu, E in zip(self.lengths, self.poisson, self.young, strict=True)
+        )
+        return stiffness * (self.free_closure(heating) - self.gap) / (1 + stiffness * compliance)
+
+    def pressure(self, heating: float) -> float:
+        """Contact pressure [Pa] (0 when open)."""
+        return max(self._traction(heating, self.stiffness), 0.0)
+
+    def gap_width(self, heating: float) -> float:
+        """Gap [m] between the blocks (negative: the penalty's interpenetration)."""
+        p = self._traction(heating, self.stiffness)
+        if p < 0:
+            p = self._traction(heating, self.open_stiffness * self.stiffness)
+            return -p / (self.open_stiffness * self.stiffness)
+        return -p / self.stiffness

@@ -234,6 +234,10 @@ def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfi
         if not re.search(rf"\b{re.escape(name)}\b", text):
             raise ValueError(f"{path}: parameter '{name}' does not appear in the file")
     error, dim = None, 0
+    # gmsh keeps a -setnumber value from one initialize to the next: pass every numeric
+    # DefineConstant, its default unless given, so that an earlier load does not leak in
+    defaults = re.findall(r"DefineConstant\[\s*(\w+)\s*=\s*([-+0-9.eE]+)\s*[;\]]", text)
+    parameters = {name: float(value) for name, value in defaults} | dict(parameters)
     if comm.rank == 0:
         argv = ["gmsh"]
         for name, value in parameters.items():

@@ -10,9 +10,17 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.interfaces import MasterLayer
 
-__all__ = ["write_vtk"]
+__all__ = ["UNITS", "write_fields", "write_vtk"]
+
+#: Output name of each field, with its unit.
+UNITS = {
+    "temperature": "temperature [K]",
+    "potential": "potential [V]",
+    "displacement": "displacement [m]",
+}
 
 
 def write_vtk(
@@ -45,7 +53,43 @@ def write_vtk(
     return written
 
 
-def _write(path: Path, function: dolfinx.fem.Function) -> Path:
+def write_fields(directory: str | Path, system: CoupledSystem) -> list[Path]:
+    """Write every body's fields (``<body>.pvd``) and master channels (``master_<k>.pvd``).
+
+    Args:
+        directory: Output folder (created).
+        system: A coupled system at its current state.
+
+    Returns:
+        The ``.pvd`` files written.
+    """
+    directory = Path(directory)
+    written = []
+    for name, body in system.bodies.items():
+        functions = []
+        for field in body.physics.fields:
+            V, parent_of = body.physics.collapsed(field)
+            f = dolfinx.fem.Function(V, name=UNITS[field])
+            f.x.array[:] = body.U.x.array[parent_of]
+            functions.append(f)
+        written.append(_write(directory / f"{name}.pvd", functions))
+    for k, layer in system.layers.items():
+        start, end = layer.V.dofmap.index_map.local_range
+        functions = []
+        for c, (field, component) in enumerate(system.channels[k]):
+            label = UNITS[field] if component is None else f"{UNITS[field]} {'xyz'[component]}"
+            f = dolfinx.fem.Function(layer.V, name=label)
+            values = system.masters[k][c * layer.size : (c + 1) * layer.size]
+            f.x.array[: end - start] = values[start:end]
+            f.x.scatter_forward()
+            functions.append(f)
+        written.append(_write(directory / f"master_{k}.pvd", functions))
+    return written
+
+
+def _write(path: Path, function: dolfinx.fem.Function | list[dolfinx.fem.Function]) -> Path:
+    functions = function if isinstance(function, list) else [function]
+    function = functions[0]
     comm = function.function_space.mesh.comm
     if comm.size == 1 and MPI.COMM_WORLD.size > 1 and MPI.COMM_WORLD.rank != 0:
         return path  # a master layer kept whole on every rank: rank 0 writes it
@@ -53,5 +97,5 @@ def _write(path: Path, function: dolfinx.fem.Function) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
     function.function_space.mesh.comm.barrier()
     with dolfinx.io.VTKFile(function.function_space.mesh.comm, str(path), "w") as vtk:
-        vtk.write_function(function, 0.0)
+        vtk.write_function(functions, 0.0)
     return path

@@ -18,8 +18,13 @@ DIRECT: Mapping[str, str] = MappingProxyType(
 )
 
 
-def make_ksp(A: PETSc.Mat, prefix: str, options: Mapping[str, str]) -> PETSc.KSP:
+def make_ksp(
+    A: PETSc.Mat, prefix: str, options: Mapping[str, str], *, setup: bool = True
+) -> PETSc.KSP:
     """KSP on ``A`` configured from ``options`` under its own ``prefix``; set up (factorised).
+
+    With ``setup=False`` the factorisation waits for the first ``setUp`` or solve (for a
+    matrix not assembled yet).
 
     Options already in the PETSc database under ``prefix`` (from the command line) win.
     """
@@ -31,7 +36,8 @@ def make_ksp(A: PETSc.Mat, prefix: str, options: Mapping[str, str]) -> PETSc.KSP
     ksp.setOptionsPrefix(prefix)
     ksp.setOperators(A)
     ksp.setFromOptions()
-    ksp.setUp()
+    if setup:
+        ksp.setUp()
     return ksp
 
 

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("demo_*.py"))
-CHECKED = {"demo_two_plates", "demo_stack"}
+CHECKED = {"demo_two_plates", "demo_stack", "demo_joule_stack", "demo_thermal_expansion"}
 
 
 def test_every_demo_is_checked_here():
@@ -55,3 +55,37 @@ def test_demo_stack(shared_tmp, monkeypatch, comm):
     fixed = {(r["h"], r["corrector"]): r["outcome"] for r in report["fixed_point"]}
     assert fixed[1e-4, "series"] == "converged" and fixed[1e4, "series"] != "converged"
     assert (out / "iterations.png").exists() and (out / "body_3.pvd").exists()
+
+
+def test_demo_joule_stack(shared_tmp, monkeypatch, comm):
+    out = shared_tmp / "out_joule_stack"
+    run_demo(demo("demo_joule_stack"), out, monkeypatch)
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    constant = report["constant_laws"]
+    assert all(error < 1e-8 for error in constant["errors"].values())
+    coupled = report["coupled"]
+    assert max(coupled["difference"].values()) < 1e-8
+    assert (
+        coupled["runs"]["subdomain"]["inner_rounds"][1:]
+        == [2] * coupled["runs"]["subdomain"]["iterations"]
+    )
+    assert coupled["orders"]["temperature"][-1] > 1.6 and coupled["orders"]["potential"][-1] > 1.6
+    assert coupled["mean_pressure"] > 1e5
+    assert (out / "newton.png").exists() and (out / "master_contact.pvd").exists()
+    assert report["ranks"] == comm.size
+
+
+def test_demo_thermal_expansion(shared_tmp, monkeypatch, comm):
+    out = shared_tmp / "out_thermal_expansion"
+    run_demo(demo("demo_thermal_expansion"), out, monkeypatch)
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    states = [row["state"] for row in report["steps"]]
+    assert states == ["open", "closed", "open"]
+    for row in report["steps"]:
+        assert row["pressure_error"] < 1e-8 and row["gap_error"] < 1e-8
+        if row["state"] == "open":
+            assert row["pressure"] == 0.0 and row["gap"] > 0
+    assert max(report["monolithic_difference"].values()) < 1e-8
+    assert (out / "pressure.png").exists() and (out / "hot" / "plate_A.pvd").exists()

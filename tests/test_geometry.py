@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 import subdomain_contact as sc
 from subdomain_contact.cases import GEO, two_plates
@@ -151,3 +152,21 @@ def test_stalled_iteration_stops_with_its_history(plates):
         sc.SubdomainConvergenceError, match=r"method1: no convergence to 1e-10 in 5 rounds"
     ):
         solver.solve(rtol=1e-10, max_rounds=5)
+
+
+def test_a_parameter_does_not_leak_into_the_next_load(comm):
+    """gmsh keeps -setnumber values across initialize(): every load must start afresh."""
+
+    def right_end(parameters):
+        scene = sc.load_scene(
+            GEO / "two_plates.geo",
+            bodies=["plate_A", "plate_B"],
+            interfaces=["contact"],
+            parameters=parameters,
+            comm=comm,
+        )
+        x = scene.bodies["plate_B"].mesh.geometry.x[:, 0]
+        return comm.allreduce(x.max(initial=0.0), op=MPI.MAX)
+
+    assert right_end({"length": 0.25}) == pytest.approx(0.5)
+    assert right_end({}) == pytest.approx(2.0)

@@ -1,0 +1,141 @@
+"""Phenomenological laws of pressure and temperature, evaluated as UFL expressions.
+
+A law is any callable ``law(p, T)`` that returns a UFL expression of the contact pressure
+``p`` [Pa] and the temperature ``T`` [K]: the classes here (a constant, a power law of
+pressure, an interpolated table) or a function the user writes, e.g.
+``lambda p, T: 1e3 * (1 + p / 1e6) * ufl.exp(-T / 500)``. Material laws of temperature use
+the same signature with ``p = 0``. ``ufl.derivative`` differentiates every one of them, so
+Newton's Jacobian includes the laws' derivatives.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+
+__all__ = ["Constant", "Law", "PowerLaw", "Table", "as_law", "check_finite"]
+
+Law = Callable[[ufl.core.expr.Expr, ufl.core.expr.Expr], ufl.core.expr.Expr]
+
+
+def check_finite(value: float, name: str, *, positive: bool = False) -> None:
+    """Refuse NaN, infinities and (where asked) values that are not strictly positive."""
+    if not math.isfinite(value) or (positive and value <= 0.0):
+        need = "a finite number > 0" if positive else "a finite number"
+        raise ValueError(f"{name} = {value!r}: must be {need}")
+
+
+@dataclass(frozen=True)
+class Constant:
+    """A law that is one number."""
+
+    value: float
+
+    def __call__(self, p: ufl.core.expr.Expr, T: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """The value, whatever ``p`` and ``T``."""
+        return ufl.as_ufl(float(self.value))
+
+
+@dataclass(frozen=True)
+class PowerLaw:
+    """``C = floor + scale (p / hardness)^exponent``: conductances of rough contacts.
+
+    The Hall–Héroult contact laws are of this type (C = α k (p/H)^β). ``floor`` is what an
+    open contact still conducts (gas, radiation); it must be > 0, or the master layer of an
+    open contact has no equation. Below ``p_min = 1e-9 hardness`` the pressure is held at
+    ``p_min``, so that the derivative stays finite for exponents below one.
+
+    Attributes:
+        scale: Coefficient at p = hardness, in the law's unit.
+        hardness: Reference pressure H [Pa].
+        exponent: β (dimensionless), > 0.
+        floor: Value at zero pressure, in the law's unit.
+    """
+
+    scale: float
+    hardness: float
+    exponent: float
+    floor: float
+
+    def __post_init__(self) -> None:
+        check_finite(self.scale, "PowerLaw scale")
+        check_finite(self.hardness, "PowerLaw hardness", positive=True)
+        check_finite(self.exponent, "PowerLaw exponent", positive=True)
+        check_finite(self.floor, "PowerLaw floor (value of an open contact)", positive=True)
+        if self.scale < 0:
+            raise ValueError(f"PowerLaw scale = {self.scale}: must be >= 0")
+
+    def __call__(self, p: ufl.core.expr.Expr, T: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """``floor + scale (max(p, p_min) / H)^β``."""
+        ratio = ufl.max_value(p / self.hardness, 1e-9)
+        return self.floor + self.scale * ratio**self.exponent
+
+
+@dataclass(frozen=True)
+class Table:
+    """Values tabulated in pressure and temperature, interpolated bilinearly.
+
+    Outside the table the value is held at its edge. Give one pressure (or one temperature)
+    for a table in the other variable alone.
+
+    Attributes:
+        pressures: Increasing pressures [Pa].
+        temperatures: Increasing temperatures [K].
+        values: ``values[i][j]`` at ``pressures[i]``, ``temperatures[j]``.
+    """
+
+    pressures: Sequence[float]
+    temperatures: Sequence[float]
+    values: Sequence[Sequence[float]]
+
+    def __post_init__(self) -> None:
+        shape = (len(self.pressures), len(self.temperatures))
+        values = np.asarray(self.values, dtype=float)
+        if values.shape != shape:
+            raise ValueError(f"Table: values have shape {values.shape}, expected {shape}")
+        for name, axis in [("pressures", self.pressures), ("temperatures", self.temperatures)]:
+            if len(axis) == 0 or np.any(np.diff(axis) <= 0) or not np.all(np.isfinite(axis)):
+                raise ValueError(f"Table {name} must be finite and increasing, got {axis}")
+        if not np.all(np.isfinite(values)):
+            raise ValueError("Table values must be finite")
+
+    def __call__(self, p: ufl.core.expr.Expr, T: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """Bilinear interpolation, as a sum of hat functions in p and T."""
+        hats_p, hats_t = _hats(p, self.pressures), _hats(T, self.temperatures)
+        return sum(
+            float(self.values[i][j]) * hp * ht
+            for i, hp in enumerate(hats_p)
+            for j, ht in enumerate(hats_t)
+        )
+
+
+def _hats(x: ufl.core.expr.Expr, nodes: Sequence[float]) -> list[ufl.core.expr.Expr]:
+    """Piecewise-linear hat functions of ``x`` on ``nodes``, constant beyond the ends."""
+    if len(nodes) == 1:
+        return [ufl.as_ufl(1.0)]
+    x = ufl.min_value(ufl.max_value(x, nodes[0]), nodes[-1])
+    hats = []
+    for i, node in enumerate(nodes):
+        hat = ufl.as_ufl(0.0)
+        if i > 0:
+            left = nodes[i - 1]
+            rising = (x - left) / (node - left)
+            hat = ufl.conditional(ufl.And(ufl.gt(x, left), ufl.le(x, node)), rising, hat)
+        if i < len(nodes) - 1:
+            right = nodes[i + 1]
+            falling = (right - x) / (right - node)
+            lower = ufl.ge(x, node) if i == 0 else ufl.gt(x, node)
+            hat = ufl.conditional(ufl.And(lower, ufl.le(x, right)), falling, hat)
+        hats.append(hat)
+    return hats
+
+
+def as_law(law: float | Law) -> Law:
+    """A law from a number or a callable."""
+    if callable(law):
+        return law
+    return Constant(float(law))

@@ -1,0 +1,434 @@
+"""Newton outside (PETSc SNES), the subdomain iteration inside, and the monolithic reference.
+
+SNES drives Newton's method on the whole coupled system of :mod:`coupled`, with its line
+search (backtracking by default, for contacts that open and close) and its function and
+Jacobian callbacks. Each linearised system ``J Δ = F`` is solved by a Python preconditioner
+under ``ksp_type preonly``: either the subdomain iteration (bodies solved with the masters
+fixed, masters corrected) or a direct solve of the merged matrix (the monolithic Newton). Both
+run the same Newton on the same discrete problem, so their results agree to solver precision.
+
+The subdomain iteration stops when each field's master residual is below ``η ‖F_f‖``, with
+the forcing term ``η = min(1e-4, max_f ‖F_f‖/scale_f)`` (the slowest field sets it): tight
+enough that the inexact steps follow the exact Newton path, and tighter near the solution,
+which keeps Newton's quadratic convergence.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg
+from petsc4py import PETSc
+
+from subdomain_contact.coupled import CoupledBody, CoupledSystem
+from subdomain_contact.multiphysics import FIELDS
+from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+
+__all__ = [
+    "InnerConvergenceError",
+    "MonolithicLinearSolver",
+    "NewtonConvergenceError",
+    "NewtonResult",
+    "NewtonStep",
+    "SubdomainLinearSolver",
+    "solve_newton",
+]
+
+_REASONS = {
+    getattr(PETSc.SNES.ConvergedReason, n): n
+    for n in dir(PETSc.SNES.ConvergedReason)
+    if n.isupper()
+}
+
+
+class InnerConvergenceError(RuntimeError):
+    """The subdomain iteration of one Newton step did not reach its tolerance."""
+
+
+class SubdomainLinearSolver:
+    """``J Δ = b`` by the subdomain iteration (METHOD.md §3) on the linearised blocks.
+
+    Each round solves every body with the master increments fixed, forms the master residual
+    ``R_k = Σ_α (C_k Δ^α + D_k Δ_m,k) − b_m,k`` and corrects ``Δ_m,k −= K_C,k⁻¹ R_k``.
+
+    Args:
+        system: The coupled system (its Jacobian assembled before :meth:`setup`).
+        corrector: ``"exact"``: ``K_C = Σ_α S^α_k``, each body's exact condensed Jacobian on
+            interface k, ``S = D − C A⁻¹ B`` (one correction suffices for one interface).
+            ``"method1"``: ``K_C = Σ_α D^α_k``, the half-links alone (paper's method 1).
+        max_rounds: Rounds allowed per linear solve.
+    """
+
+    def __init__(
+        self, system: CoupledSystem, *, corrector: str = "exact", max_rounds: int = 100
+    ) -> None:
+        if corrector not in ("exact", "method1"):
+            raise ValueError(f"corrector = {corrector!r}: 'exact' or 'method1'")
+        self.system, self.corrector, self.max_rounds = system, corrector, max_rounds
+        self.factors: dict[str, tuple] = {}
+        self.rounds: list[int] = []
+
+    def setup(self) -> None:
+        """Build and factorise each interface's corrector from the assembled blocks."""
+        for k, m in self.system.sizes.items():
+            total = np.zeros((m, m))
+            for body in self.system.bodies_on(k):
+                total += self._condensed(body, k, m)
+            self.factors[k] = scipy.linalg.lu_factor(total)
+
+    def _condensed(self, body: CoupledBody, k: str, m: int) -> npt.NDArray[np.float64]:
+        """Dense ``P_kᵀ (D − C A⁻¹ B) P_k`` (exact) or ``P_kᵀ D P_k`` (method 1)."""
+        S = np.zeros((m, m))
+        for j in range(m):
+            unit = np.zeros(m)
+            unit[j] = 1.0
+            S[:, j] = body.apply_D(k, unit)
+            if self.corrector == "exact":
+                y = body.solve(body.couple(body.B, {k: unit}, k_only=k))
+                S[:, j] -= body.apply_C(k, y, m)
+        return S
+
+    def solve(
+        self, b: npt.NDArray[np.float64], tolerance: dict[str, float]
+    ) -> tuple[npt.NDArray[np.float64], int]:
+        """Solve until each field's master residual is below its tolerance; (Δ, rounds)."""
+        system = self.system
+        b_masters = system.split_masters(b[system.master_slice])
+        dm = {k: np.zeros(n) for k, n in system.sizes.items()}
+        out = np.zeros_like(b)
+        first = None
+        for rounds in range(1, self.max_rounds + 1):
+            R = {k: -b_masters[k] for k in system.sizes}
+            for name, body in system.bodies.items():
+                xb = body.solve(b[system.slices[name]] - body.couple(body.B, dm))
+                out[system.slices[name]] = xb
+                for k in body.slaves:
+                    R[k] += body.apply_C(k, xb, system.sizes[k]) + body.apply_D(k, dm[k])
+            norms = self._field_norms(R)
+            first = norms if first is None else first
+            if all(norms[f] <= tolerance[f] for f in norms):
+                out[system.master_slice] = system.join_masters(dm)
+                return out, rounds
+            if not all(
+                np.isfinite(v) and v <= 1e8 * max(first[f], tolerance[f]) for f, v in norms.items()
+            ):
+                break
+            for k in dm:
+                dm[k] -= scipy.linalg.lu_solve(self.factors[k], R[k])
+        raise InnerConvergenceError(
+            f"subdomain iteration ({self.corrector} corrector): master residual {_fmt(norms)} "
+            f"after {rounds} rounds, tolerance {_fmt(tolerance)} (first round {_fmt(first)})"
+        )
+
+    def _field_norms(self, R: dict[str, np.ndarray]) -> dict[str, float]:
+        """2-norm of each field's part of replicated master vectors."""
+        fields = self.system.problem.fields
+        norms = dict.fromkeys(fields, 0.0)
+        for k, r in R.items():
+            for f in fields:
+                norms[f] += float(np.sum(r[self.system.master_fields[k] == FIELDS.index(f)] ** 2))
+        return {f: float(np.sqrt(v)) for f, v in norms.items()}
+
+
+def _fmt(values: dict[str, float]) -> str:
+    return ", ".join(f"{f} {v:.3e}" for f, v in values.items())
+
+
+class MonolithicLinearSolver:
+    """``J Δ = b`` by a direct solve (MUMPS) of the merged matrix: the reference.
+
+    Args:
+        system: The coupled system (its Jacobian assembled before :meth:`setup`).
+    """
+
+    def __init__(self, system: CoupledSystem) -> None:
+        self.system = system
+        self.K: PETSc.Mat | None = None
+        self.ksp: PETSc.KSP | None = None
+        self.rounds: list[int] = []
+
+    def setup(self) -> None:
+        """Merge the blocks into one AIJ matrix and factorise it."""
+        system = self.system
+        names, interfaces = list(system.bodies), list(system.sizes)
+        n = len(names) + len(interfaces)
+        blocks: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
+        made = []
+        for a, name in enumerate(names):
+            body = system.bodies[name]
+            blocks[a][a] = body.A
+            for m, k in enumerate(interfaces, start=len(names)):
+                if k not in body.slaves:
+                    continue
+                P = self._prolongation(body, k)
+                BP, PtC, PtDP = body.B[k].matMult(P), P.transposeMatMult(body.C[k]), None
+                PtDP = body.D[k].PtAP(P)
+                blocks[a][m], blocks[m][a] = BP, PtC
+                if blocks[m][m] is None:
+                    blocks[m][m] = PtDP
+                else:
+                    blocks[m][m].axpy(1.0, PtDP, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                    made.append(PtDP)
+                made += [P, BP, PtC]
+        made += [blocks[m][m] for m in range(len(names), n)]
+        nest = PETSc.Mat().createNest(blocks, comm=system.comm)
+        destroy(self.K, self.ksp)
+        self.K = nest.convert("aij", out=PETSc.Mat())
+        self.ksp = make_ksp(self.K, "sc_coupled_monolithic_", DIRECT)
+        destroy(nest, *made)
+
+    def _prolongation(self, body: CoupledBody, k: str) -> PETSc.Mat:
+        """``P_k``: body rows × master columns (all owned by rank 0), 1 at slave DOFs."""
+        m = self.system.sizes[k]
+        local = m if self.system.comm.rank == 0 else 0
+        P = PETSc.Mat().createAIJ(
+            ((body.size, PETSc.DETERMINE), (local, m)), nnz=(1, 1), comm=self.system.comm
+        )
+        slaves = body.slaves[k]
+        for dof, master in zip(slaves.local_dofs, slaves.master_index, strict=True):
+            P.setValue(body.start + int(dof), int(master), 1.0)
+        P.assemble()
+        return P
+
+    def solve(
+        self, b: npt.NDArray[np.float64], tolerance: dict[str, float]
+    ) -> tuple[npt.NDArray[np.float64], int]:
+        """Direct solve; returns (Δ, 1)."""
+        rhs, x = self.K.createVecs()
+        rhs.array[:] = b
+        self.ksp.solve(rhs, x)
+        if self.ksp.getConvergedReason() < 0:
+            raise InnerConvergenceError(
+                f"monolithic direct solve failed (reason {self.ksp.getConvergedReason()})"
+            )
+        out = x.array.copy()
+        destroy(rhs, x)
+        return out, 1
+
+    def __del__(self) -> None:
+        """Destroy the merged matrix and its factorisation."""
+        destroy(self.__dict__.get("K"), self.__dict__.get("ksp"))
+
+
+@dataclass
+class NewtonStep:
+    """One Newton iterate: its residual and the inner solve that led to it.
+
+    Attributes:
+        iteration: Newton iteration (0: the initial state).
+        residual: 2-norm of the whole residual.
+        fields: 2-norm of each field's residual [W, A, N].
+        inner_rounds: Subdomain rounds of the linear solve that produced this iterate (0 at
+            iteration 0; 1 for the monolithic direct solve).
+    """
+
+    iteration: int
+    residual: float
+    fields: dict[str, float]
+    inner_rounds: int
+
+
+@dataclass
+class NewtonResult:
+    """Outcome of a Newton solve: the history, the reason and the wall time [s]."""
+
+    history: list[NewtonStep] = field(default_factory=list)
+    reason: str = ""
+    seconds: float = 0.0
+
+    @property
+    def iterations(self) -> int:
+        """Newton iterations taken."""
+        return self.history[-1].iteration if self.history else 0
+
+    def table(self) -> str:
+        """The history as text lines, one per iterate."""
+        return "\n".join(
+            f"  {s.iteration:3d}  |F| = {s.residual:.3e}  "
+            + "  ".join(f"{n} {v:.2e}" for n, v in s.fields.items())
+            + f"  inner rounds {s.inner_rounds}"
+            for s in self.history
+        )
+
+
+class NewtonConvergenceError(RuntimeError):
+    """Newton did not converge; ``result`` holds its history."""
+
+    def __init__(self, message: str, result: NewtonResult) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+class _Callbacks:
+    """SNES callbacks: residual, Jacobian, the shell Jacobian product, the inner solve."""
+
+    def __init__(self, system, linear, rtol: float, max_it: int) -> None:
+        self.system, self.linear, self.rtol, self.max_it = system, linear, rtol, max_it
+        self.result = NewtonResult()
+        self.scale: dict[str, float] = {}
+        self.eta = 1e-4
+        self.pending_rounds = 0
+        self.failure: Exception | None = None
+
+    def function(self, snes, x, f) -> None:
+        self._guard(lambda: (self.system.set_state(x), self.system.residual(f)))
+
+    def jacobian(self, snes, x, J, P) -> None:
+        def assemble():
+            self.system.set_state(x)
+            self.system.assemble_jacobian()
+            self.linear.setup()
+
+        self._guard(assemble)
+
+    def mult(self, mat, x, y) -> None:
+        self._guard(lambda: self.system.mult(x, y))
+
+    def apply(self, pc, b, y) -> None:
+        def inner():
+            norms = self.system.field_norms(b)
+            tolerance = {
+                f: max(self.eta * v, 1e-3 * self.rtol * self.scale[f]) for f, v in norms.items()
+            }
+            delta, rounds = self.linear.solve(b.array_r, tolerance)
+            y.array[:] = delta
+            self.pending_rounds += rounds
+
+        self._guard(inner)
+
+    def converged(self, snes, it, norms) -> int:
+        reasons = PETSc.SNES.ConvergedReason
+        f = snes.getFunction()[0]
+        fields = self.system.field_norms(f)
+        total = float(np.sqrt(sum(v**2 for v in fields.values())))
+        self.result.history.append(NewtonStep(it, total, fields, self.pending_rounds))
+        self.pending_rounds = 0
+        if not np.isfinite(total):
+            return reasons.DIVERGED_FNORM_NAN
+        for name, value in fields.items():
+            self.scale[name] = max(self.scale.get(name, 0.0), value)
+        progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
+        self.eta = min(1e-4, max(progress, default=1e-4))  # the slowest field sets the pace
+        if all(v <= self.rtol * self.scale[n] for n, v in fields.items()):
+            return reasons.CONVERGED_FNORM_RELATIVE
+
+        if it >= self.max_it:
+            return reasons.DIVERGED_MAX_IT
+        return reasons.ITERATING
+
+    def _guard(self, action) -> None:
+        """Run a callback; keep its exception for the error message (SNES only sees a code)."""
+        try:
+            action()
+        except Exception as error:
+            self.failure = error
+            raise
+
+
+class _Shell:
+    """Python context of the shell Jacobian and of the inner-solve preconditioner."""
+
+    def __init__(self, callbacks: _Callbacks) -> None:
+        self.callbacks = callbacks
+
+    def mult(self, mat, x, y) -> None:
+        self.callbacks.mult(mat, x, y)
+
+    def apply(self, pc, b, y) -> None:
+        self.callbacks.apply(pc, b, y)
+
+
+def solve_newton(
+    system: CoupledSystem,
+    *,
+    linear: str = "subdomain",
+    corrector: str = "exact",
+    rtol: float = 1e-10,
+    max_it: int = 30,
+    line_search: str = "basic",
+    max_rounds: int = 100,
+) -> NewtonResult:
+    """Newton's method on the coupled system, from its current state.
+
+    Converged when every field's residual is below ``rtol`` times its scale: the largest of
+    the residuals it has had and of its residual at the *cold state* (every unknown zero but
+    the Dirichlet values), which measures the loads the field can see. A field that starts
+    at rest (a mechanical state at T_ref) is then judged against its loads, not against its
+    own round-off.
+
+    Args:
+        system: The coupled system; its state is the initial guess and receives the solution.
+        linear: ``"subdomain"`` (the subdomain iteration inside) or ``"monolithic"`` (a
+            direct solve of the merged Jacobian: the reference).
+        corrector: Corrector of the subdomain iteration: ``"exact"`` or ``"method1"``.
+        rtol: Relative tolerance per field.
+        max_it: Newton iterations allowed.
+        line_search: SNES line search: ``"bt"`` (backtracking) or ``"basic"`` (full steps).
+        max_rounds: Subdomain rounds allowed per linear solve.
+
+    Raises:
+        NewtonConvergenceError: Newton (or an inner solve) failed; the error holds the history.
+    """
+    start = time.perf_counter()
+    if linear == "subdomain":
+        solver = SubdomainLinearSolver(system, corrector=corrector, max_rounds=max_rounds)
+    elif linear == "monolithic":
+        solver = MonolithicLinearSolver(system)
+    else:
+        raise ValueError(f"linear = {linear!r}: 'subdomain' or 'monolithic'")
+    callbacks = _Callbacks(system, solver, rtol, max_it)
+    shell = _Shell(callbacks)
+    x, f = system.create_vector(), system.create_vector()
+    system.get_state(x)
+    callbacks.scale = _cold_residuals(system, f)
+    system.set_state(x)
+    system.apply_conditions()
+    system.get_state(x)
+    sizes = (x.getLocalSize(), x.getSize())
+    J = PETSc.Mat().createPython((sizes, sizes), context=shell, comm=system.comm)
+    J.setUp()
+    snes = PETSc.SNES().create(system.comm)
+    snes.setOptionsPrefix("sc_newton_")
+    snes.setType("newtonls")
+    snes.getLineSearch().setType(line_search)
+    snes.setFunction(callbacks.function, f)
+    snes.setJacobian(callbacks.jacobian, J, J)
+    snes.setConvergenceTest(callbacks.converged)
+    snes.setTolerances(max_it=max_it + 1)
+    ksp = snes.getKSP()
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType("python")
+    pc.setPythonContext(shell)
+    snes.setFromOptions()
+    result = callbacks.result
+    try:
+        snes.solve(None, x)
+        reason = snes.getConvergedReason()
+    except PETSc.Error as error:
+        reason = None
+        cause = callbacks.failure or error
+    system.set_state(x)
+    result.seconds = time.perf_counter() - start
+    destroy(snes, J, x, f)
+    if reason is None or reason < 0:
+        result.reason = _REASONS.get(reason, "error in a callback")
+        why = f"{cause}" if reason is None else result.reason
+        raise NewtonConvergenceError(
+            f"Newton ({linear}) failed after {result.iterations} iterations: {why}\n"
+            f"{result.table()}",
+            result,
+        ) from (cause if reason is None else None)
+    result.reason = _REASONS[reason]
+    return result
+
+
+def _cold_residuals(system: CoupledSystem, f: PETSc.Vec) -> dict[str, float]:
+    """Each field's residual norm with every unknown zero but the Dirichlet values."""
+    system.reset()
+    system.apply_conditions()
+    system.residual(f)
+    return system.field_norms(f)

@@ -1,0 +1,300 @@
+"""Thermo-electro-mechanical contact: closed forms, the monolithic Newton, laws and errors."""
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from subdomain_contact import laws
+from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
+from subdomain_contact.cases import GEO
+from subdomain_contact.coupled import CoupledSystem
+from subdomain_contact.geometry import load_scene
+from subdomain_contact.multiphysics import (
+    Contact,
+    CoupledProblem,
+    Displacement,
+    ExponentialClosure,
+    Material,
+    Penalty,
+    Potential,
+)
+from subdomain_contact.newton import NewtonConvergenceError, solve_newton
+from subdomain_contact.thermal import Temperature
+
+
+@pytest.fixture(scope="module")
+def bars(comm):
+    """Two bars of 0.5 m × 0.1 m, 4 × 2 quadrilaterals each."""
+    return load_scene(
+        GEO / "two_plates.geo",
+        bodies=["plate_A", "plate_B"],
+        interfaces=["contact"],
+        parameters={"layers": 4, "rows": 2, "length": 0.5, "height": 0.1},
+        comm=comm,
+    )
+
+
+def max_nodal_error(system, truth, field, comm):
+    """max |U − exact| / max |exact| over every body's owned nodes (global)."""
+    worst, scale = 0.0, 0.0
+    for name, body in system.bodies.items():
+        points, values = body.nodal(field)
+        exact = truth[name](points[:, 0])
+        worst = max(worst, np.max(np.abs(values - exact), initial=0.0))
+        scale = max(scale, np.max(np.abs(exact), initial=0.0))
+    return comm.allreduce(worst, op=MPI.MAX) / comm.allreduce(scale, op=MPI.MAX)
+
+
+def test_thermal_only_scene_builds_no_potential_or_displacement(bars, comm):
+    problem = CoupledProblem(
+        bars,
+        {"plate_A": Material(conductivity=2.0, heat_source=50.0), "plate_B": Material(5.0)},
+        {"contact": Contact(conductance=3.0)},
+        [Temperature("left", 1.0), Temperature("right", 0.0)],
+    )
+    assert problem.fields == ("temperature",)
+    system = CoupledSystem(problem)
+    for body in system.bodies.values():
+        W = body.physics.W
+        assert W.num_sub_spaces == 0 and W.dofmap.index_map_bs == 1
+        assert W.element.basix_element.value_size == 1
+    assert system.channels == {"contact": [("temperature", None)]}
+    assert system.num_dofs()["masters"] == 3
+    solve_newton(system)
+    exact = TwoPlates(0.5, 0.5, 2.0, 5.0, 3.0, 1.0, 0.0, 50.0, 0.0)
+    truth = {"plate_A": exact.temperature_a, "plate_B": exact.temperature_b}
+    assert max_nodal_error(system, truth, "temperature", comm) < 1e-12
+
+
+def joule_problem(scene, *, voltage=0.5, h=2e3, g=5e4):
+    return CoupledProblem(
+        scene,
+        {
+            "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
+            "plate_B": Material(conductivity=50.0, electrical_conductivity=3e4),
+        },
+        {"contact": Contact(conductance=h, electrical_conductance=g)},
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 320.0),
+            Potential("left", voltage),
+            Potential("right", 0.0),
+        ],
+    )
+
+
+def test_joule_bars_match_the_closed_form(bars, comm):
+    system = CoupledSystem(joule_problem(bars))
+    system.reset({"temperature": 300.0})
+    result = solve_newton(system, rtol=1e-12)
+    exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 0.5, 300.0, 320.0)
+    temperature = {"plate_A": exact.thermal.temperature_a, "plate_B": exact.thermal.temperature_b}
+    potential = {"plate_A": exact.potential_a, "plate_B": exact.potential_b}
+    assert max_nodal_error(system, temperature, "temperature", comm) < 1e-10
+    assert max_nodal_error(system, potential, "potential", comm) < 1e-10
+    current = system.bodies["plate_B"].contact_integral("contact", "current density")
+    # seen from bar B the current leaves it into the master: minus the current in +x
+    assert current == pytest.approx(-exact.current_density * 0.1, rel=1e-10)
+    # the contact heat: Joule heat g Δφ² is in the closed form only if deposited half per side
+    assert exact.thermal.contact_heat > 0
+    assert result.iterations <= 3
+    assert all(step.inner_rounds == 2 for step in result.history[1:])
+
+
+def expansion_problem(scene, temperature, *, gap=1e-4):
+    steel = Material(
+        conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
+    )
+    return CoupledProblem(
+        scene,
+        {"plate_A": steel, "plate_B": steel},
+        {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
+        [
+            Temperature("left", temperature),
+            Temperature("right", temperature),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, 0.0),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )
+
+
+@pytest.mark.parametrize("temperature", [350.0, 250.0])
+def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
+    system = CoupledSystem(expansion_problem(bars, temperature))
+    system.reset({"temperature": 300.0})
+    solve_newton(system, rtol=1e-12)
+    exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, 1e-4, 1e13)
+    heating = temperature - 300.0
+    pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
+    ux = {}
+    for name, body in system.bodies.items():
+        points, values = body.nodal("displacement", 0)
+        on = np.isclose(points[:, 0], 0.5)
+        total = comm.allreduce(np.array([values[on].sum(), on.sum()]), op=MPI.SUM)
+        ux[name] = total[0] / total[1]
+    gap = 1e-4 - (ux["plate_A"] - ux["plate_B"])
+    if heating > 0:
+        assert exact.pressure(heating) > 1e8
+        assert pressure == pytest.approx(exact.pressure(heating), rel=1e-9)
+    else:
+        assert exact.pressure(heating) == 0.0 and pressure == 0.0
+        assert gap == pytest.approx(1e-4 + 1.3 * 1.2e-5 * 50.0, rel=1e-6)
+    assert gap == pytest.approx(exact.gap_width(heating), rel=1e-9)
+
+
+def coupled_problem(scene):
+    """Every field, p- and T-dependent laws, bars squeezed by 20 µm."""
+    h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
+    return CoupledProblem(
+        scene,
+        {
+            "plate_A": Material(
+                conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
+                electrical_conductivity=laws.Table((0.0,), (300.0, 600.0), [[1e4, 1.5e4]]),
+                young=1e10,
+                poisson=0.25,
+                expansion=4e-6,
+                reference_temperature=300.0,
+            ),
+            "plate_B": Material(
+                conductivity=45.0,
+                electrical_conductivity=3e4,
+                young=2e11,
+                poisson=0.3,
+                expansion=1.2e-5,
+                reference_temperature=300.0,
+            ),
+        },
+        {
+            "contact": Contact(
+                conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
+                electrical_conductance=laws.Table(
+                    (0.0, 1e6, 1e7), (300.0, 500.0), [[1e3, 1.5e3], [5e4, 6e4], [2e5, 2.2e5]]
+                ),
+                normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
+            )
+        },
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 300.0),
+            Potential("left", 0.5),
+            Potential("right", 0.0),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, -2e-05),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )
+
+
+def test_coupled_newton_equals_monolithic_and_converges_quadratically(bars):
+    system = CoupledSystem(coupled_problem(bars))
+    states, results = {}, {}
+    for linear in ("subdomain", "monolithic"):
+        system.reset({"temperature": 300.0})
+        results[linear] = solve_newton(system, linear=linear, rtol=1e-12)
+        states[linear] = system.state()
+    difference = system.difference(states["subdomain"], states["monolithic"])
+    assert max(difference.values()) < 1e-8
+    history = results["subdomain"].history
+    assert [s.inner_rounds for s in history[1:]] == [2] * (len(history) - 1)
+    pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
+    assert 1e5 < pressure < 1e8  # the contact is closed and its laws see a pressure
+    for field in ("temperature", "potential"):
+        r = [s.fields[field] for s in history[-3:]]
+        order = np.log(r[2] / r[1]) / np.log(r[1] / r[0])
+        assert order > 1.6, (field, r)
+
+
+def test_method1_corrector_gives_the_same_answer_with_more_rounds(bars):
+    # method 1 is the small-h corrector: soft contacts (h̄ ≈ k/Δx / 4, ḡ ≈ σ/Δx / 40)
+    system = CoupledSystem(joule_problem(bars, h=10.0, g=1e3))
+    states, rounds = {}, {}
+    for corrector in ("exact", "method1"):
+        system.reset({"temperature": 300.0})
+        result = solve_newton(system, corrector=corrector, rtol=1e-12, max_rounds=400)
+        states[corrector] = system.state()
+        rounds[corrector] = sum(s.inner_rounds for s in result.history)
+    assert max(system.difference(states["method1"], states["exact"]).values()) < 1e-8
+    assert rounds["method1"] > 2 * rounds["exact"]
+
+
+def test_newton_failure_reports_its_history(bars):
+    system = CoupledSystem(coupled_problem(bars))
+    system.reset({"temperature": 300.0})
+    with pytest.raises(NewtonConvergenceError, match="DIVERGED_MAX_IT") as caught:
+        solve_newton(system, max_it=2)
+    assert len(caught.value.result.history) == 3
+    assert "inner rounds" in str(caught.value)
+
+
+def test_inner_failure_names_the_corrector(bars):
+    system = CoupledSystem(expansion_problem(bars, 350.0))
+    system.reset({"temperature": 300.0})
+    with pytest.raises(NewtonConvergenceError, match="method1 corrector"):
+        solve_newton(system, corrector="method1", max_rounds=5)
+
+
+@pytest.mark.parametrize(
+    ("material", "contact", "message"),
+    [
+        (Material(conductivity=-1.0), Contact(conductance=1.0), "conductivity = -1.0"),
+        (Material(conductivity=float("nan")), Contact(conductance=1.0), "conductivity = nan"),
+        (Material(conductivity=1.0), Contact(conductance=0.0), "conductance = 0.0"),
+        (Material(conductivity=1.0), Contact(), "needs 'conductance'"),
+        (Material(conductivity=1.0, poisson=0.5), Contact(conductance=1.0), "poisson"),
+        (
+            Material(conductivity=1.0),
+            Contact(conductance=1.0, electrical_conductance=1.0),
+            "has no field for 'electrical_conductance'",
+        ),
+    ],
+)
+def test_bad_data_is_refused_by_name(bars, material, contact, message):
+    with pytest.raises(ValueError, match=message):
+        CoupledProblem(bars, {"plate_A": material, "plate_B": material}, {"contact": contact})
+
+
+def test_condition_for_a_missing_field_is_refused(bars):
+    with pytest.raises(ValueError, match="'left': Potential needs the potential field"):
+        CoupledProblem(
+            bars,
+            {"plate_A": Material(conductivity=1.0), "plate_B": Material(conductivity=1.0)},
+            {"contact": Contact(conductance=1.0)},
+            [Potential("left", 1.0)],
+        )
+
+
+def test_power_law_refuses_a_zero_floor():
+    with pytest.raises(ValueError, match="floor"):
+        laws.PowerLaw(scale=1.0, hardness=1e6, exponent=0.9, floor=0.0)
+
+
+def evaluate(law, p, T, comm):
+    """The law's value at constant (p, T): ∫ law dx over a unit square."""
+    mesh = dolfinx.mesh.create_unit_square(comm, 1, 1)
+    pc, Tc = dolfinx.fem.Constant(mesh, p), dolfinx.fem.Constant(mesh, T)
+    form = dolfinx.fem.form(law(pc, Tc) * ufl.dx(domain=mesh))
+    return comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+
+
+def test_table_interpolates_bilinearly_and_holds_its_edges(comm):
+    pressures, temperatures = (0.0, 1e6, 4e6), (300.0, 500.0)
+    values = np.array([[1.0, 2.0], [10.0, 30.0], [40.0, 50.0]])
+    table = laws.Table(pressures, temperatures, values)
+    for p, T in [(0.0, 300.0), (5e5, 400.0), (2.5e6, 450.0), (1e7, 250.0), (-1.0, 900.0)]:
+        pc, Tc = np.clip(p, 0.0, 4e6), np.clip(T, 300.0, 500.0)
+        along_p = [np.interp(pc, pressures, values[:, j]) for j in range(2)]
+        expected = np.interp(Tc, temperatures, along_p)
+        assert evaluate(table, p, T, comm) == pytest.approx(expected, rel=1e-13)
+
+
+def test_power_law_values(comm):
+    law = laws.PowerLaw(scale=2e3, hardness=1e7, exponent=0.8, floor=10.0)
+    assert evaluate(law, 5e6, 300.0, comm) == pytest.approx(10.0 + 2e3 * 0.5**0.8, rel=1e-13)
+    # below p_min = 1e-9 H the pressure is held at p_min (a finite derivative for β < 1)
+    at_zero = 10.0 + 2e3 * 1e-9**0.8
+    assert evaluate(law, 0.0, 300.0, comm) == pytest.approx(at_zero, rel=1e-13)
+    assert evaluate(law, -5e6, 300.0, comm) == pytest.approx(at_zero, rel=1e-13)
