@@ -92,6 +92,24 @@ class Scene:
         """Whether this rank's group solves ``body``."""
         return self.owner[body] == self.group
 
+    def check_entries(
+        self, materials: Mapping[str, object], contacts: Mapping[str, object]
+    ) -> None:
+        """Require one material per body and one contact per interface, by name.
+
+        Raises:
+            ValueError: An entry is missing or names nothing in the scene.
+        """
+        for kind, given, known in [
+            ("body", materials, self.bodies),
+            ("interface", contacts, self.interfaces),
+        ]:
+            if set(given) != set(known):
+                raise ValueError(
+                    f"{self.source}: give one {kind} entry for each of {sorted(known)}, "
+                    f"got {sorted(given)}"
+                )
+
     @property
     def shared(self) -> bool:
         """Whether every body is spread over all ranks (one group)."""

@@ -193,15 +193,7 @@ class CoupledProblem:
 
     def __post_init__(self) -> None:
         source = self.scene.source
-        for kind, given, known in [
-            ("body", self.materials, self.scene.bodies),
-            ("interface", self.contacts, self.scene.interfaces),
-        ]:
-            if set(given) != set(known):
-                raise ValueError(
-                    f"{source}: give one {kind} entry for each of {sorted(known)}, "
-                    f"got {sorted(given)}"
-                )
+        self.scene.check_entries(self.materials, self.contacts)
         fields = {name: m.fields() for name, m in self.materials.items()}
         first = next(iter(fields.values()))
         for name, f in fields.items():

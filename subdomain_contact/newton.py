@@ -164,8 +164,11 @@ class MonolithicLinearSolver:
                 if k not in body.slaves:
                     continue
                 P = self._prolongation(body, k)
-                BP, PtC, PtDP = body.B[k].matMult(P), P.transposeMatMult(body.C[k]), None
-                PtDP = body.D[k].PtAP(P)
+                BP, PtC, PtDP = (
+                    body.B[k].matMult(P),
+                    P.transposeMatMult(body.C[k]),
+                    body.D[k].PtAP(P),
+                )
                 blocks[a][m], blocks[m][a] = BP, PtC
                 if blocks[m][m] is None:
                     blocks[m][m] = PtDP

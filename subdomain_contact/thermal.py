@@ -6,7 +6,6 @@ convection and contact conductance W/(m^2 K).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -14,6 +13,7 @@ import dolfinx
 import ufl
 
 from subdomain_contact.geometry import Body, Scene
+from subdomain_contact.laws import check_finite
 
 __all__ = [
     "BodyForms",
@@ -25,13 +25,6 @@ __all__ = [
     "ThermalProblem",
     "body_forms",
 ]
-
-
-def _check(value: float, name: str, *, positive: bool = False) -> None:
-    """Refuse NaN, infinities and (where asked) values that are not strictly positive."""
-    if not math.isfinite(value) or (positive and value <= 0.0):
-        need = "a finite number > 0" if positive else "a finite number"
-        raise ValueError(f"{name} = {value!r}: must be {need}")
 
 
 @dataclass(frozen=True)
@@ -96,20 +89,12 @@ class ThermalProblem:
 
     def __post_init__(self) -> None:
         source = self.scene.source
-        for kind, given, known in [
-            ("body", self.materials, self.scene.bodies),
-            ("interface", self.contacts, self.scene.interfaces),
-        ]:
-            if set(given) != set(known):
-                raise ValueError(
-                    f"{source}: give one {kind} entry for each of {sorted(known)}, "
-                    f"got {sorted(given)}"
-                )
+        self.scene.check_entries(self.materials, self.contacts)
         for name, m in self.materials.items():
-            _check(m.conductivity, f"body '{name}': conductivity", positive=True)
-            _check(m.source, f"body '{name}': source")
+            check_finite(m.conductivity, f"body '{name}': conductivity", positive=True)
+            check_finite(m.source, f"body '{name}': source")
         for name, c in self.contacts.items():
-            _check(c.conductance, f"interface '{name}': conductance h", positive=True)
+            check_finite(c.conductance, f"interface '{name}': conductance h", positive=True)
         every = set().union(*(b.boundaries for b in self.scene.bodies.values()))
         for bc in self.conditions:
             if bc.boundary not in every or bc.boundary in self.scene.interfaces:
@@ -119,7 +104,7 @@ class ThermalProblem:
                 )
             for field in ("value", "coefficient", "ambient"):
                 if hasattr(bc, field):
-                    _check(getattr(bc, field), f"boundary '{bc.boundary}': {field}")
+                    check_finite(getattr(bc, field), f"boundary '{bc.boundary}': {field}")
             if isinstance(bc, Convection) and bc.coefficient < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
 
