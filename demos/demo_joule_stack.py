@@ -188,7 +188,7 @@ system = CoupledSystem(coupled)
 runs, states = {}, {}
 for linear in ("monolithic", "subdomain"):
     system.reset({"temperature": 300.0})
-    result = solve_newton(system, linear=linear, rtol=1e-12, line_search="basic")
+    result = solve_newton(system, linear=linear, rtol=1e-12)
     states[linear] = system.state()
     runs[linear] = {
         "iterations": result.iterations,

@@ -112,10 +112,11 @@ class JouleBars:
 
 @dataclass(frozen=True)
 class BlocksBetweenWalls:
-    """Two blocks in a row between fixed walls, uniformly heated, in plane strain.
+    """Two blocks in a row between fixed walls, uniformly heated, in plane strain or in 3D.
 
-    Each block may expand freely across (traction-free top, rollers at the bottom), so the
-    stress is uniaxial, σ_xx = −p, and its strain ε_xx = −p (1 − ν²)/E + (1 + ν) α ΔT. The
+    Each block may expand freely across (traction-free sides, rollers), so the stress is
+    uniaxial, σ_xx = −p, and its strain is ε_xx = −p (1 − ν²)/E + (1 + ν) α ΔT in plane strain
+    (ε_zz = 0), ε_xx = −p/E + α ΔT in 3D (``plane_strain=False``). The
     contact between the blocks has an initial gap and a penalty law p = k_n ⟨closure − gap⟩;
     an open contact keeps the tension stiffness ``open_stiffness`` k_n (see
     :class:`~subdomain_contact.multiphysics.Contact`). Units: m, Pa, 1/K, K, Pa/m.
@@ -128,17 +129,18 @@ class BlocksBetweenWalls:
     gap: float
     stiffness: float
     open_stiffness: float = 1e-9
+    plane_strain: bool = True
 
     def free_closure(self, heating: float) -> float:
         """Closure [m] the blocks would make without contact, heated by ``heating`` [K]."""
         return sum(
-            L * (1 + nu) * a * heating
+            L * (1 + nu if self.plane_strain else 1.0) * a * heating
             for L, nu, a in zip(self.lengths, self.poisson, self.expansion, strict=True)
         )
 
     def _traction(self, heating: float, stiffness: float) -> float:
         compliance = sum(
-            L * (1 - nu**2) / E
+            L * (1 - nu**2 if self.plane_strain else 1.0) / E
             for L, nu, E in zip(self.lengths, self.poisson, self.young, strict=True)
         )
         return stiffness * (self.free_closure(heating) - self.gap) / (1 + stiffness * compliance)

@@ -1,7 +1,7 @@
 """Newton outside (PETSc SNES), the subdomain iteration inside, and the monolithic reference.
 
 SNES drives Newton's method on the whole coupled system of :mod:`coupled`, with its line
-search (backtracking by default, for contacts that open and close) and its function and
+search (full steps by default, backtracking on request) and its function and
 Jacobian callbacks. Each linearised system ``J Δ = F`` is solved by a Python preconditioner
 under ``ksp_type preonly``: either the subdomain iteration (bodies solved with the masters
 fixed, masters corrected) or a direct solve of the merged matrix (the monolithic Newton). Both
@@ -59,15 +59,24 @@ class SubdomainLinearSolver:
         corrector: ``"exact"``: ``K_C = Σ_α S^α_k``, each body's exact condensed Jacobian on
             interface k, ``S = D − C A⁻¹ B`` (one correction suffices for one interface).
             ``"method1"``: ``K_C = Σ_α D^α_k``, the half-links alone (paper's method 1).
-        max_rounds: Rounds allowed per linear solve.
+        max_rounds: Rounds (or GMRES iterations) allowed per linear solve.
+        krylov: Accelerate by GMRES on the interface problem, preconditioned by the
+            correctors (a round per iteration): what several interfaces per body need. Without
+            it the correctors act as block Jacobi across interfaces (the paper's fixed point).
     """
 
     def __init__(
-        self, system: CoupledSystem, *, corrector: str = "exact", max_rounds: int = 100
+        self,
+        system: CoupledSystem,
+        *,
+        corrector: str = "exact",
+        max_rounds: int = 100,
+        krylov: bool = False,
     ) -> None:
         if corrector not in ("exact", "method1"):
             raise ValueError(f"corrector = {corrector!r}: 'exact' or 'method1'")
         self.system, self.corrector, self.max_rounds = system, corrector, max_rounds
+        self.krylov = krylov
         self.factors: dict[str, tuple] = {}
         self.rounds: list[int] = []
 
@@ -95,22 +104,16 @@ class SubdomainLinearSolver:
         self, b: npt.NDArray[np.float64], tolerance: dict[str, float]
     ) -> tuple[npt.NDArray[np.float64], int]:
         """Solve until each field's master residual is below its tolerance; (Δ, rounds)."""
+        if self.krylov:
+            return self._solve_krylov(b, tolerance)
         system = self.system
-        b_masters = system.split_masters(b[system.master_slice])
         dm = {k: np.zeros(n) for k, n in system.sizes.items()}
-        out = np.zeros_like(b)
         first = None
         for rounds in range(1, self.max_rounds + 1):
-            R = {k: -b_masters[k] for k in system.sizes}
-            for name, body in system.bodies.items():
-                xb = body.solve(b[system.slices[name]] - body.couple(body.B, dm))
-                out[system.slices[name]] = xb
-                for k in body.slaves:
-                    R[k] += body.apply_C(k, xb, system.sizes[k]) + body.apply_D(k, dm[k])
+            out, R = self._round(b, dm)
             norms = self._field_norms(R)
             first = norms if first is None else first
             if all(norms[f] <= tolerance[f] for f in norms):
-                out[system.master_slice] = system.join_masters(dm)
                 return out, rounds
             if not all(
                 np.isfinite(v) and v <= 1e8 * max(first[f], tolerance[f]) for f, v in norms.items()
@@ -122,6 +125,77 @@ class SubdomainLinearSolver:
             f"subdomain iteration ({self.corrector} corrector): master residual {_fmt(norms)} "
             f"after {rounds} rounds, tolerance {_fmt(tolerance)} (first round {_fmt(first)})"
         )
+
+    def _round(
+        self, b: npt.NDArray[np.float64] | None, dm: dict[str, np.ndarray]
+    ) -> tuple[npt.NDArray[np.float64], dict[str, np.ndarray]]:
+        """Solve every body with master increments ``dm``; (Δ, master residual per interface).
+
+        With ``b = None`` the right-hand side is zero: ``R`` is then the interface operator
+        ``Σ_α (D − C A⁻¹ B) dm`` applied to ``dm``.
+        """
+        system = self.system
+        out = np.zeros(system.local_size)
+        masters = system.split_masters(b[system.master_slice]) if b is not None else None
+        R = {k: -masters[k] if b is not None else np.zeros(n) for k, n in system.sizes.items()}
+        for name, body in system.bodies.items():
+            rhs = -body.couple(body.B, dm)
+            if b is not None:
+                rhs += b[system.slices[name]]
+            xb = body.solve(rhs)
+            out[system.slices[name]] = xb
+            for k in body.slaves:
+                R[k] += body.apply_C(k, xb, system.sizes[k]) + body.apply_D(k, dm[k])
+        out[system.master_slice] = system.join_masters(dm)
+        return out, R
+
+    def _solve_krylov(
+        self, b: npt.NDArray[np.float64], tolerance: dict[str, float]
+    ) -> tuple[npt.NDArray[np.float64], int]:
+        """GMRES on the interface problem ``S dm = −R(0)``, preconditioned by the correctors.
+
+        Rows are scaled by each field's tolerance, so that ``‖W r‖ ≤ 1`` bounds every field's
+        master residual by its own tolerance (W, A and N never share one norm).
+        """
+        system = self.system
+        zero = {k: np.zeros(n) for k, n in system.sizes.items()}
+        _, R0 = self._round(b, zero)
+        weights = {
+            k: 1.0 / np.array([tolerance[FIELDS[f]] for f in system.master_fields[k]])
+            for k in system.sizes
+        }
+        if all(np.linalg.norm(weights[k] * R0[k]) <= 1.0 for k in R0):
+            out, _ = self._round(b, zero)
+            return out, 2
+        shell = _InterfaceShell(self, weights)
+        local = system.local_size - system.master_slice.start
+        S = PETSc.Mat().createPython(
+            ((local, None), (local, None)), context=shell, comm=system.comm
+        )
+        S.setUp()
+        ksp = PETSc.KSP().create(system.comm)
+        ksp.setOptionsPrefix("sc_newton_interface_")
+        ksp.setOperators(S)
+        ksp.setType("gmres")
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        ksp.getPC().setType("python")
+        ksp.getPC().setPythonContext(shell)
+        ksp.setTolerances(rtol=0.0, atol=1.0, max_it=self.max_rounds)
+        ksp.setFromOptions()
+        rhs, x = S.createVecs()
+        rhs.array[:] = system.join_masters({k: -weights[k] * R0[k] for k in R0})
+        ksp.solve(rhs, x)
+        reason, iterations = ksp.getConvergedReason(), ksp.getIterationNumber()
+        dm = system.split_masters(x.array_r)
+        destroy(ksp, S, rhs, x)
+        out, R = self._round(b, dm)
+        norms = self._field_norms(R)
+        if reason < 0 or not all(norms[f] <= 1.01 * tolerance[f] for f in norms):
+            raise InnerConvergenceError(
+                f"interface GMRES ({self.corrector} corrector): master residual {_fmt(norms)} "
+                f"after {iterations} iterations (reason {reason}), tolerance {_fmt(tolerance)}"
+            )
+        return out, iterations + 2
 
     def _field_norms(self, R: dict[str, np.ndarray]) -> dict[str, float]:
         """2-norm of each field's part of replicated master vectors."""
@@ -135,6 +209,27 @@ class SubdomainLinearSolver:
 
 def _fmt(values: dict[str, float]) -> str:
     return ", ".join(f"{f} {v:.3e}" for f, v in values.items())
+
+
+class _InterfaceShell:
+    """Python context: the scaled interface operator ``W S`` and its preconditioner."""
+
+    def __init__(self, solver: SubdomainLinearSolver, weights: dict[str, np.ndarray]) -> None:
+        self.solver, self.weights = solver, weights
+
+    def mult(self, mat, x, y) -> None:
+        system = self.solver.system
+        dm = system.split_masters(x.array_r)
+        _, R = self.solver._round(None, dm)
+        y.array[:] = system.join_masters({k: self.weights[k] * R[k] for k in R})
+
+    def apply(self, pc, x, y) -> None:
+        system = self.solver.system
+        r = system.split_masters(x.array_r)
+        factors = self.solver.factors
+        y.array[:] = system.join_masters(
+            {k: scipy.linalg.lu_solve(factors[k], r[k] / self.weights[k]) for k in r}
+        )
 
 
 class MonolithicLinearSolver:
@@ -353,6 +448,7 @@ def solve_newton(
     max_it: int = 30,
     line_search: str = "basic",
     max_rounds: int = 100,
+    krylov: bool | None = None,
 ) -> NewtonResult:
     """Newton's method on the coupled system, from its current state.
 
@@ -369,15 +465,24 @@ def solve_newton(
         corrector: Corrector of the subdomain iteration: ``"exact"`` or ``"method1"``.
         rtol: Relative tolerance per field.
         max_it: Newton iterations allowed.
-        line_search: SNES line search: ``"bt"`` (backtracking) or ``"basic"`` (full steps).
+        line_search: SNES line search: ``"basic"`` (full steps: the semi-smooth Newton of
+            unilateral contact, which finds the contact status in a few steps) or ``"bt"``
+            (backtracking on ‖F‖², which mixes W, A and N and can creep when a step changes
+            the contact status).
         max_rounds: Subdomain rounds allowed per linear solve.
+        krylov: GMRES on the interface problem (see :class:`SubdomainLinearSolver`); by
+            default where some body touches several interfaces.
 
     Raises:
         NewtonConvergenceError: Newton (or an inner solve) failed; the error holds the history.
     """
     start = time.perf_counter()
     if linear == "subdomain":
-        solver = SubdomainLinearSolver(system, corrector=corrector, max_rounds=max_rounds)
+        if krylov is None:
+            krylov = any(len(body.slaves) > 1 for body in system.bodies.values())
+        solver = SubdomainLinearSolver(
+            system, corrector=corrector, max_rounds=max_rounds, krylov=krylov
+        )
     elif linear == "monolithic":
         solver = MonolithicLinearSolver(system)
     else:
