@@ -47,6 +47,17 @@ def max_nodal_error(system, truth, field, comm):
     return comm.allreduce(worst, op=MPI.MAX) / comm.allreduce(scale, op=MPI.MAX)
 
 
+def contact_displacements(system, comm):
+    """Body name -> mean u_x [m] of its nodes on the contact plane x = 0.5 (global)."""
+    ux = {}
+    for name, body in system.bodies.items():
+        points, values = body.nodal("displacement", 0)
+        on = np.isclose(points[:, 0], 0.5)
+        total = comm.allreduce(np.array([values[on].sum(), on.sum()]), op=MPI.SUM)
+        ux[name] = total[0] / total[1]
+    return ux
+
+
 def test_thermal_only_scene_builds_no_potential_or_displacement(bars, comm):
     problem = CoupledProblem(
         bars,
@@ -129,12 +140,7 @@ def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
     exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, 1e-4, 1e13)
     heating = temperature - 300.0
     pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
-    ux = {}
-    for name, body in system.bodies.items():
-        points, values = body.nodal("displacement", 0)
-        on = np.isclose(points[:, 0], 0.5)
-        total = comm.allreduce(np.array([values[on].sum(), on.sum()]), op=MPI.SUM)
-        ux[name] = total[0] / total[1]
+    ux = contact_displacements(system, comm)
     gap = 1e-4 - (ux["plate_A"] - ux["plate_B"])
     if heating > 0:
         assert exact.pressure(heating) > 1e8
@@ -345,12 +351,7 @@ def test_thermal_expansion_in_3d(blocks3d, comm, temperature):
     heating = temperature - 300.0
     area = 0.2 * 0.2
     pressure = system.bodies["block_A"].contact_integral("contact", "pressure") / area
-    ux = {}
-    for name, body in system.bodies.items():
-        points, values = body.nodal("displacement", 0)
-        on = np.isclose(points[:, 0], 0.5)
-        total = comm.allreduce(np.array([values[on].sum(), on.sum()]), op=MPI.SUM)
-        ux[name] = total[0] / total[1]
+    ux = contact_displacements(system, comm)
     gap = 1e-4 - (ux["block_A"] - ux["block_B"])
     if heating > 0:
         assert exact.pressure(heating) > 5e7
