@@ -10,8 +10,17 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from subdomain_contact import laws
 from subdomain_contact.analytic import TwoPlates
 from subdomain_contact.geometry import Scene, load_scene
+from subdomain_contact.multiphysics import (
+    Contact,
+    CoupledProblem,
+    Displacement,
+    ExponentialClosure,
+    Material,
+    Potential,
+)
 from subdomain_contact.thermal import (
     Convection,
     Temperature,
@@ -20,7 +29,16 @@ from subdomain_contact.thermal import (
     ThermalProblem,
 )
 
-__all__ = ["GEO", "TwoPlatesCase", "stack", "stack_scene", "two_plates", "two_plates_scene"]
+__all__ = [
+    "GEO",
+    "TwoPlatesCase",
+    "bars_scene",
+    "squeezed_joule_bars",
+    "stack",
+    "stack_scene",
+    "two_plates",
+    "two_plates_scene",
+]
 
 #: The project's geometry folder.
 GEO = Path(__file__).resolve().parent.parent / "geo"
@@ -118,3 +136,62 @@ def stack(scene: Scene, *, h: float, cooled: bool = True) -> ThermalProblem:
         conditions.append(Convection("top", 0.5, 0.3))
     contacts = {f"contact_{i}": ThermalContact(h) for i in range(n - 1)}
     return ThermalProblem(scene, materials, contacts, conditions)
+
+
+def bars_scene(layers: int = 4, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+    """``geo/two_plates.geo`` as two bars of 0.5 m × 0.1 m (``layers`` × ``rows`` quads each)."""
+    return load_scene(
+        GEO / "two_plates.geo",
+        bodies=["plate_A", "plate_B"],
+        interfaces=["contact"],
+        parameters={"layers": layers, "rows": rows, "length": 0.5, "height": 0.1},
+        comm=comm,
+    )
+
+
+def squeezed_joule_bars(scene: Scene) -> CoupledProblem:
+    """Every field coupled: 0.5 V across the bars, squeezed 20 µm between two walls at 300 K.
+
+    Bar A: k(T) law, σ(T) table; bar B constant; thermal expansion; exponential closure law;
+    h(p, T) a power law times a temperature factor; g(p, T) a table in p and T.
+    """
+    h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
+    return CoupledProblem(
+        scene,
+        {
+            "plate_A": Material(
+                conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
+                electrical_conductivity=laws.Table((0.0,), (300.0, 600.0), [[1e4, 1.5e4]]),
+                young=1e10,
+                poisson=0.25,
+                expansion=4e-6,
+                reference_temperature=300.0,
+            ),
+            "plate_B": Material(
+                conductivity=45.0,
+                electrical_conductivity=3e4,
+                young=2e11,
+                poisson=0.3,
+                expansion=1.2e-5,
+                reference_temperature=300.0,
+            ),
+        },
+        {
+            "contact": Contact(
+                conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
+                electrical_conductance=laws.Table(
+                    (0.0, 1e6, 1e7), (300.0, 500.0), [[1e3, 1.5e3], [5e4, 6e4], [2e5, 2.2e5]]
+                ),
+                normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
+            )
+        },
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 300.0),
+            Potential("left", 0.5),
+            Potential("right", 0.0),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, -2e-5),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )

@@ -8,14 +8,13 @@ from mpi4py import MPI
 
 from subdomain_contact import laws
 from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
-from subdomain_contact.cases import GEO
+from subdomain_contact.cases import GEO, bars_scene, squeezed_joule_bars
 from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.geometry import load_scene
 from subdomain_contact.multiphysics import (
     Contact,
     CoupledProblem,
     Displacement,
-    ExponentialClosure,
     Material,
     Penalty,
     Potential,
@@ -27,13 +26,7 @@ from subdomain_contact.thermal import Temperature
 @pytest.fixture(scope="module")
 def bars(comm):
     """Two bars of 0.5 m × 0.1 m, 4 × 2 quadrilaterals each."""
-    return load_scene(
-        GEO / "two_plates.geo",
-        bodies=["plate_A", "plate_B"],
-        interfaces=["contact"],
-        parameters={"layers": 4, "rows": 2, "length": 0.5, "height": 0.1},
-        comm=comm,
-    )
+    return bars_scene(4, 2, comm=comm)
 
 
 def max_nodal_error(system, truth, field, comm):
@@ -151,52 +144,8 @@ def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
     assert gap == pytest.approx(exact.gap_width(heating), rel=1e-9)
 
 
-def coupled_problem(scene):
-    """Every field, p- and T-dependent laws, bars squeezed by 20 µm."""
-    h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
-    return CoupledProblem(
-        scene,
-        {
-            "plate_A": Material(
-                conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
-                electrical_conductivity=laws.Table((0.0,), (300.0, 600.0), [[1e4, 1.5e4]]),
-                young=1e10,
-                poisson=0.25,
-                expansion=4e-6,
-                reference_temperature=300.0,
-            ),
-            "plate_B": Material(
-                conductivity=45.0,
-                electrical_conductivity=3e4,
-                young=2e11,
-                poisson=0.3,
-                expansion=1.2e-5,
-                reference_temperature=300.0,
-            ),
-        },
-        {
-            "contact": Contact(
-                conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
-                electrical_conductance=laws.Table(
-                    (0.0, 1e6, 1e7), (300.0, 500.0), [[1e3, 1.5e3], [5e4, 6e4], [2e5, 2.2e5]]
-                ),
-                normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
-            )
-        },
-        [
-            Temperature("left", 300.0),
-            Temperature("right", 300.0),
-            Potential("left", 0.5),
-            Potential("right", 0.0),
-            Displacement("left", 0, 0.0),
-            Displacement("right", 0, -2e-05),
-            Displacement("bottom", 1, 0.0),
-        ],
-    )
-
-
 def test_coupled_newton_equals_monolithic_and_converges_quadratically(bars):
-    system = CoupledSystem(coupled_problem(bars))
+    system = CoupledSystem(squeezed_joule_bars(bars))
     states, results = {}, {}
     for linear in ("subdomain", "monolithic"):
         system.reset({"temperature": 300.0})
@@ -228,7 +177,7 @@ def test_method1_corrector_gives_the_same_answer_with_more_rounds(bars):
 
 
 def test_newton_failure_reports_its_history(bars):
-    system = CoupledSystem(coupled_problem(bars))
+    system = CoupledSystem(squeezed_joule_bars(bars))
     system.reset({"temperature": 300.0})
     with pytest.raises(NewtonConvergenceError, match="DIVERGED_MAX_IT") as caught:
         solve_newton(system, max_it=2)
