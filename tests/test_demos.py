@@ -39,6 +39,10 @@ def test_demo_two_plates(shared_tmp, monkeypatch, comm):
     assert (out / "iterations_vs_h.png").stat().st_size > 10_000
     assert (out / "plate_A.pvd").exists() and (out / "master_contact.pvd").exists()
     assert report["ranks"] == comm.size
+    rows = {(r["variant"], r["h"], r["acceleration"]): r for r in report["partitioned"]}
+    assert rows["uniform", 1e4, "iqn-ils"]["iterations"] == 3
+    assert rows["uniform", 1e4, "iqn-ils"]["max_error"] < 1e-10
+    assert rows["uniform", 1e4, "constant"]["iterations"] is None
 
 
 def test_demo_stack(shared_tmp, monkeypatch, comm):
