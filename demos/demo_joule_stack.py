@@ -40,16 +40,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from subdomain_contact import laws
 from subdomain_contact.analytic import JouleBars
-from subdomain_contact.cases import GEO
+from subdomain_contact.cases import GEO, squeezed_joule_bars
 from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.geometry import load_scene
 from subdomain_contact.multiphysics import (
     Contact,
     CoupledProblem,
-    Displacement,
-    ExponentialClosure,
     Material,
     Potential,
 )
@@ -137,53 +134,10 @@ del system
 # The walls hold x = 0 and push x = 1 m in by 20 µm; the bottom slides on rollers. Bar A is a
 # carbon-like material whose k and σ grow with T; bar B a steel-like one whose σ falls. The
 # closure law is stiffening; h grows with pressure (power law) and temperature, g is
-# tabulated in p and T. Newton starts from 300 K and everything else zero.
+# tabulated in p and T (`cases.squeezed_joule_bars`, shared with the tests and the benchmark).
+# Newton starts from 300 K and everything else zero.
 
-hardness = 1e7  # Pa
-conductance = laws.PowerLaw(scale=5e3, hardness=hardness, exponent=0.8, floor=100.0)
-coupled = CoupledProblem(
-    scene,
-    {
-        "plate_A": Material(
-            conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
-            electrical_conductivity=laws.Table(
-                (0.0,), (300.0, 400.0, 600.0), [[1e4, 1.2e4, 1.5e4]]
-            ),
-            young=1e10,
-            poisson=0.25,
-            expansion=4e-6,
-            reference_temperature=300.0,
-        ),
-        "plate_B": Material(
-            conductivity=45.0,
-            electrical_conductivity=lambda p, T: 3e4 / (1 + 1e-3 * (T - 300.0)),
-            young=2e11,
-            poisson=0.3,
-            expansion=1.2e-5,
-            reference_temperature=300.0,
-        ),
-    },
-    {
-        "contact": Contact(
-            conductance=lambda p, T: conductance(p, T) * (1 + 1e-3 * (T - 300.0)),
-            electrical_conductance=laws.Table(
-                (0.0, 1e5, 1e6, 1e7),
-                (300.0, 500.0),
-                [[1e3, 1.5e3], [1e4, 1.3e4], [5e4, 6e4], [2e5, 2.2e5]],
-            ),
-            normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
-        )
-    },
-    [
-        Temperature("left", 300.0),
-        Temperature("right", 300.0),
-        Potential("left", voltage),
-        Potential("right", 0.0),
-        Displacement("left", 0, 0.0),
-        Displacement("right", 0, -2e-05),
-        Displacement("bottom", 1, 0.0),
-    ],
-)
+coupled = squeezed_joule_bars(scene)  # its laws, written out: subdomain_contact/cases.py
 system = CoupledSystem(coupled)
 runs, states = {}, {}
 for linear in ("monolithic", "subdomain"):

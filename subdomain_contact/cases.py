@@ -149,46 +149,47 @@ def bars_scene(layers: int = 4, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORL
     )
 
 
-def squeezed_joule_bars(scene: Scene) -> CoupledProblem:
-    """Every field coupled: 0.5 V across the bars, squeezed 20 µm between two walls at 300 K.
+def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> CoupledProblem:
+    """Every field coupled: ``voltage`` across the bars, squeezed 20 µm between walls at 300 K.
 
-    Bar A: k(T) law, σ(T) table; bar B constant; thermal expansion; exponential closure law;
-    h(p, T) a power law times a temperature factor; g(p, T) a table in p and T.
+    Bar A is carbon-like (k(T) a law, σ(T) a table, both growing with T), bar B steel-like (σ(T)
+    a law, falling); thermal expansion; an exponential closure law; h(p, T) a power law times a
+    temperature factor; g(p, T) a table in p and T. The bottom slides on rollers.
     """
     h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
+    carbon = Material(
+        conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
+        electrical_conductivity=laws.Table((0.0,), (300.0, 400.0, 600.0), [[1e4, 1.2e4, 1.5e4]]),
+        young=1e10,
+        poisson=0.25,
+        expansion=4e-6,
+        reference_temperature=300.0,
+    )
+    steel = Material(
+        conductivity=45.0,
+        electrical_conductivity=lambda p, T: 3e4 / (1 + 1e-3 * (T - 300.0)),
+        young=2e11,
+        poisson=0.3,
+        expansion=1.2e-5,
+        reference_temperature=300.0,
+    )
+    contact = Contact(
+        conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
+        electrical_conductance=laws.Table(
+            (0.0, 1e5, 1e6, 1e7),
+            (300.0, 500.0),
+            [[1e3, 1.5e3], [1e4, 1.3e4], [5e4, 6e4], [2e5, 2.2e5]],
+        ),
+        normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
+    )
     return CoupledProblem(
         scene,
-        {
-            "plate_A": Material(
-                conductivity=lambda p, T: 10.0 * (1 + 2e-3 * (T - 300.0)),
-                electrical_conductivity=laws.Table((0.0,), (300.0, 600.0), [[1e4, 1.5e4]]),
-                young=1e10,
-                poisson=0.25,
-                expansion=4e-6,
-                reference_temperature=300.0,
-            ),
-            "plate_B": Material(
-                conductivity=45.0,
-                electrical_conductivity=3e4,
-                young=2e11,
-                poisson=0.3,
-                expansion=1.2e-5,
-                reference_temperature=300.0,
-            ),
-        },
-        {
-            "contact": Contact(
-                conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
-                electrical_conductance=laws.Table(
-                    (0.0, 1e6, 1e7), (300.0, 500.0), [[1e3, 1.5e3], [5e4, 6e4], [2e5, 2.2e5]]
-                ),
-                normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
-            )
-        },
+        {"plate_A": carbon, "plate_B": steel},
+        {"contact": contact},
         [
             Temperature("left", 300.0),
             Temperature("right", 300.0),
-            Potential("left", 0.5),
+            Potential("left", voltage),
             Potential("right", 0.0),
             Displacement("left", 0, 0.0),
             Displacement("right", 0, -2e-5),

@@ -94,7 +94,7 @@ class CoupledBody:
         destroy(self.A, *self.B.values(), *self.C.values(), *self.D.values(), *self.vectors)
 
     def assemble(self) -> None:
-        """Assemble the Jacobian blocks at the current state and refactorise ``A``."""
+        """Assemble the Jacobian blocks at the current state."""
         bcs = self.physics.bcs
         self.A.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self.A, self.a_A, bcs=bcs)
@@ -107,6 +107,9 @@ class CoupledBody:
                 M.assemble()
         for B in self.B.values():  # the rows of fixed DOFs are their conditions alone
             B.zeroRows(rows, diag=0.0)
+
+    def factorise(self) -> None:
+        """Factorise the assembled ``A`` (for :meth:`solve`)."""
         self.ksp.setOperators(self.A)
         self.ksp.setUp()
 
@@ -165,16 +168,14 @@ class CoupledBody:
             raise RuntimeError(f"body '{self.name}': linear solve failed")
         return x.array.copy()
 
-    def couple(self, mats: dict[str, PETSc.Mat], masters: dict, k_only: str | None = None):
-        """``Σ_k M_k P_k m_k`` on owned DOFs for M = B or D."""
+    def couple(self, masters: dict[str, np.ndarray]) -> npt.NDArray[np.float64]:
+        """``Σ_k B_k P_k m_k`` on owned DOFs, over the interfaces of ``masters`` it touches."""
         out = np.zeros(self.size)
         s, y = self.vectors[2], self.vectors[3]
-        for k, M in mats.items():
-            if k_only is not None and k != k_only:
-                continue
+        for k in masters.keys() & self.B.keys():
             s.array[:] = 0.0
             self.slaves[k].scatter(masters[k], s.array)
-            M.mult(s, y)
+            self.B[k].mult(s, y)
             out += y.array
         return out
 
@@ -283,11 +284,11 @@ class CoupledSystem:
         master_total = sum(self.sizes.values()) if self.comm.rank == 0 else 0
         self.local_size = int(offsets[-1]) + master_total
         self.master_slice = slice(int(offsets[-1]), self.local_size)
-        self.field_of = self._field_index()
         self.master_fields = {
             k: np.repeat([FIELDS.index(f) for f, _ in self.channels[k]], self.layers[k].size)
             for k in self.sizes
         }
+        self.field_of = self._field_index()
 
     def bodies_on(self, k: str) -> list[CoupledBody]:
         """The bodies that touch interface ``k``."""
@@ -330,7 +331,7 @@ class CoupledSystem:
                 dofs = body.physics.collapsed(field)[1]
                 body.U.x.array[dofs] = value
         self.masters = {}
-        for k, _n in self.sizes.items():
+        for k in self.sizes:
             values = [initial.get(f, 0.0) for f, _ in self.channels[k]]
             self.masters[k] = np.repeat(values, self.layers[k].size).astype(float)
         for body in self.bodies.values():
@@ -402,7 +403,7 @@ class CoupledSystem:
             s, t = body.vectors[0], body.vectors[1]
             s.array[:] = xb
             body.A.mult(s, t)
-            out[self.slices[name]] = t.array + body.couple(body.B, masters)
+            out[self.slices[name]] = t.array + body.couple(masters)
             for k in body.slaves:
                 result[k] += body.apply_C(k, xb, self.sizes[k]) + body.apply_D(k, masters[k])
         out[self.master_slice] = self.join_masters(result)
@@ -416,13 +417,7 @@ class CoupledSystem:
                 dofs = body.physics.collapsed(field)[1]
                 part[dofs[dofs < body.size]] = FIELDS.index(field)
             index[self.slices[name]] = part
-        if self.comm.rank == 0:
-            labels = [
-                np.full(self.layers[k].size, FIELDS.index(f), dtype=np.int32)
-                for k in self.sizes
-                for f, _ in self.channels[k]
-            ]
-            index[self.master_slice] = np.concatenate(labels) if labels else []
+        index[self.master_slice] = self.join_masters(self.master_fields)
         return index
 
     def field_norms(self, f: PETSc.Vec) -> dict[str, float]:

@@ -78,10 +78,11 @@ class SubdomainLinearSolver:
         self.system, self.corrector, self.max_rounds = system, corrector, max_rounds
         self.krylov = krylov
         self.factors: dict[str, tuple] = {}
-        self.rounds: list[int] = []
 
     def setup(self) -> None:
-        """Build and factorise each interface's corrector from the assembled blocks."""
+        """Factorise the bodies, then build and factorise each interface's corrector."""
+        for body in self.system.bodies.values():
+            body.factorise()
         for k, m in self.system.sizes.items():
             total = np.zeros((m, m))
             for body in self.system.bodies_on(k):
@@ -96,7 +97,7 @@ class SubdomainLinearSolver:
             unit[j] = 1.0
             S[:, j] = body.apply_D(k, unit)
             if self.corrector == "exact":
-                y = body.solve(body.couple(body.B, {k: unit}, k_only=k))
+                y = body.solve(body.couple({k: unit}))
                 S[:, j] -= body.apply_C(k, y, m)
         return S
 
@@ -139,7 +140,7 @@ class SubdomainLinearSolver:
         masters = system.split_masters(b[system.master_slice]) if b is not None else None
         R = {k: -masters[k] if b is not None else np.zeros(n) for k, n in system.sizes.items()}
         for name, body in system.bodies.items():
-            rhs = -body.couple(body.B, dm)
+            rhs = -body.couple(dm)
             if b is not None:
                 rhs += b[system.slices[name]]
             xb = body.solve(rhs)
@@ -159,14 +160,13 @@ class SubdomainLinearSolver:
         """
         system = self.system
         zero = {k: np.zeros(n) for k, n in system.sizes.items()}
-        _, R0 = self._round(b, zero)
+        out, R0 = self._round(b, zero)
         weights = {
             k: 1.0 / np.array([tolerance[FIELDS[f]] for f in system.master_fields[k]])
             for k in system.sizes
         }
         if all(np.linalg.norm(weights[k] * R0[k]) <= 1.0 for k in R0):
-            out, _ = self._round(b, zero)
-            return out, 2
+            return out, 1
         shell = _InterfaceShell(self, weights)
         local = system.local_size - system.master_slice.start
         S = PETSc.Mat().createPython(
@@ -243,7 +243,6 @@ class MonolithicLinearSolver:
         self.system = system
         self.K: PETSc.Mat | None = None
         self.ksp: PETSc.KSP | None = None
-        self.rounds: list[int] = []
 
     def setup(self) -> None:
         """Merge the blocks into one AIJ matrix and factorise it."""
@@ -361,7 +360,11 @@ class NewtonConvergenceError(RuntimeError):
 
 
 class _Callbacks:
-    """SNES callbacks: residual, Jacobian, the shell Jacobian product, the inner solve."""
+    """SNES callbacks: residual and Jacobian; product and inner solve as Python contexts.
+
+    The object is the Python context of the shell Jacobian (``mult``) and of the
+    preconditioner that runs the inner solve (``apply``).
+    """
 
     def __init__(self, system, linear, rtol: float, max_it: int) -> None:
         self.system, self.linear, self.rtol, self.max_it = system, linear, rtol, max_it
@@ -426,19 +429,6 @@ class _Callbacks:
             raise
 
 
-class _Shell:
-    """Python context of the shell Jacobian and of the inner-solve preconditioner."""
-
-    def __init__(self, callbacks: _Callbacks) -> None:
-        self.callbacks = callbacks
-
-    def mult(self, mat, x, y) -> None:
-        self.callbacks.mult(mat, x, y)
-
-    def apply(self, pc, b, y) -> None:
-        self.callbacks.apply(pc, b, y)
-
-
 def solve_newton(
     system: CoupledSystem,
     *,
@@ -488,7 +478,6 @@ def solve_newton(
     else:
         raise ValueError(f"linear = {linear!r}: 'subdomain' or 'monolithic'")
     callbacks = _Callbacks(system, solver, rtol, max_it)
-    shell = _Shell(callbacks)
     x, f = system.create_vector(), system.create_vector()
     system.get_state(x)
     callbacks.scale = _cold_residuals(system, f)
@@ -496,7 +485,7 @@ def solve_newton(
     system.apply_conditions()
     system.get_state(x)
     sizes = (x.getLocalSize(), x.getSize())
-    J = PETSc.Mat().createPython((sizes, sizes), context=shell, comm=system.comm)
+    J = PETSc.Mat().createPython((sizes, sizes), context=callbacks, comm=system.comm)
     J.setUp()
     snes = PETSc.SNES().create(system.comm)
     snes.setOptionsPrefix("sc_newton_")
@@ -510,7 +499,7 @@ def solve_newton(
     ksp.setType("preonly")
     pc = ksp.getPC()
     pc.setType("python")
-    pc.setPythonContext(shell)
+    pc.setPythonContext(callbacks)
     snes.setFromOptions()
     result = callbacks.result
     try:
