@@ -19,12 +19,13 @@ from subdomain_contact.correctors import (
 )
 from subdomain_contact.geometry import Scene, load_scene
 from subdomain_contact.krylov import KrylovResult, solve_interface_krylov
-from subdomain_contact.monolithic import MonolithicResult, solve_monolithic
+from subdomain_contact.monolithic import CG_GAMG, MonolithicResult, solve_monolithic
 from subdomain_contact.output import write_vtk
 from subdomain_contact.subdomain import (
     SubdomainConvergenceError,
     SubdomainResult,
     ThermalSubdomains,
+    body_blocks,
 )
 from subdomain_contact.thermal import (
     Convection,
@@ -36,6 +37,7 @@ from subdomain_contact.thermal import (
 )
 
 __all__ = [
+    "CG_GAMG",
     "Convection",
     "HeatFlux",
     "KrylovResult",
@@ -53,6 +55,7 @@ __all__ = [
     "ThermalProblem",
     "ThermalSubdomains",
     "TwoPlates",
+    "body_blocks",
     "load_scene",
     "paper_factor",
     "solve_interface_krylov",

@@ -42,6 +42,8 @@ class TwoPlates:
             - self.source_b * self.length_b**2 / (2 * self.k_b)
         )
         drive += self.contact_heat / 2 * (self.length_a / self.k_a - self.length_b / self.k_b)
+        if self.h == 0:  # insulating: no heat crosses
+            return 0.0
         return drive / (self.length_a / self.k_a + 1 / self.h + self.length_b / self.k_b)
 
     def temperature_a(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -41,6 +41,8 @@ class BodyBlocks:
         facet_tags: Facet tags of the body mesh.
         layers: Master layer of each interface the body touches.
         half_links: Interface name -> h̄ = 2h [W/(m^2 K)].
+        factorise: Factorise the body matrix now (not needed when the blocks only feed the
+            monolithic solve).
     """
 
     def __init__(
@@ -50,6 +52,8 @@ class BodyBlocks:
         facet_tags: dolfinx.mesh.MeshTags,
         layers: Mapping[str, MasterLayer],
         half_links: Mapping[str, float],
+        *,
+        factorise: bool = True,
     ) -> None:
         self.name, self.forms, self.V = name, forms, forms.V
         self.comm: MPI.Comm = self.V.mesh.comm
@@ -58,7 +62,7 @@ class BodyBlocks:
         self.slaves = {k: slave_map(layer, self.V, facet_tags) for k, layer in layers.items()}
         self.a_body = dolfinx.fem.form(self._solid_plus_links(list(layers)))
         self.A = _assemble(self.a_body, forms.bcs)
-        self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT)
+        self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT, setup=factorise)
         self._ticket = Reaper.register(self.ksp)
         self.K_free = _assemble(dolfinx.fem.form(forms.solid), [])
         load = dolfinx.fem.form(forms.load)
@@ -135,11 +139,19 @@ class BodyBlocks:
         self.slaves[k].scatter(master, self._slave.array)
         return self._slave
 
-    def solve(self, master: MasterValues, *, homogeneous: bool = False) -> dolfinx.fem.Function:
+    def solve(
+        self,
+        master: MasterValues,
+        *,
+        homogeneous: bool = False,
+        loads: MasterValues | None = None,
+    ) -> dolfinx.fem.Function:
         """Temperature [K] of the body for given master values [K] of its interfaces.
 
         ``homogeneous``: without the body's own loads and conditions, so that the residuals
         that follow are the interface stiffness applied to ``master`` (``S^α U_m``).
+        ``loads``: interface name -> nodal heat [W] put into the body at its slave DOFs, in
+        master order (a Neumann datum of a partitioned coupling); none at fixed DOFs.
         """
         b = self._rhs
         if homogeneous:
@@ -149,6 +161,10 @@ class BodyBlocks:
         for k, hbar in self.half_links.items():
             self.M_rows[k].mult(self._on_slaves(k, master[k]), self._tmp)
             b.axpy(hbar, self._tmp)
+        for k, load in (loads or {}).items():
+            nodal = self._on_slaves(k, load)
+            nodal.array[self.slaves[k].local_dofs[self._fixed_slaves[k]]] = 0.0
+            b.axpy(1.0, nodal)
         self.ksp.solve(b, self.T.x.petsc_vec)
         if self.ksp.getConvergedReason() < 0:
             raise RuntimeError(

@@ -33,6 +33,8 @@ __all__ = [
     "GEO",
     "TwoPlatesCase",
     "bars_scene",
+    "blocks3d_scene",
+    "heated_blocks",
     "squeezed_joule_bars",
     "stack",
     "stack_scene",
@@ -61,7 +63,12 @@ class TwoPlatesCase:
 
 
 def two_plates_scene(
-    layers: int = 4, rows: int = 4, *, quads: bool = True, comm: MPI.Comm = MPI.COMM_WORLD
+    layers: int = 4,
+    rows: int = 4,
+    *,
+    quads: bool = True,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
 ) -> Scene:
     """``geo/two_plates.geo`` with ``layers`` element layers per plate and ``rows`` along y."""
     return load_scene(
@@ -70,6 +77,7 @@ def two_plates_scene(
         interfaces=["contact"],
         parameters={"layers": layers, "rows": rows, "quads": int(quads)},
         comm=comm,
+        placement=placement,
     )
 
 
@@ -107,7 +115,12 @@ def two_plates(
 
 
 def stack_scene(
-    bodies: int = 8, layers: int = 2, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORLD
+    bodies: int = 8,
+    layers: int = 2,
+    rows: int = 2,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
 ) -> Scene:
     """``geo/stack.geo``: ``bodies`` unit squares in a chain, ``layers`` × ``rows`` cells each."""
     return load_scene(
@@ -116,6 +129,35 @@ def stack_scene(
         interfaces=[f"contact_{i}" for i in range(bodies - 1)],
         parameters={"bodies": bodies, "layers": layers, "rows": rows},
         comm=comm,
+        placement=placement,
+    )
+
+
+def blocks3d_scene(
+    size: float = 0.1, *, comm: MPI.Comm = MPI.COMM_WORLD, placement: str = "shared"
+) -> Scene:
+    """``geo/blocks3d.geo``: two 0.5 × 0.2 × 0.2 m blocks, tetrahedra of ``size`` [m]."""
+    return load_scene(
+        GEO / "blocks3d.geo",
+        bodies=["block_A", "block_B"],
+        interfaces=["contact"],
+        parameters={"size": size},
+        comm=comm,
+        placement=placement,
+    )
+
+
+def heated_blocks(scene: Scene, *, h: float = 1e3) -> ThermalProblem:
+    """The 3D thermal case: 1 K on the left end, cooled on the right end and on the front.
+
+    Conductivities 1 and 10 W/(m K), contact conductance ``h`` [W/(m^2 K)]; the front
+    convection (5 W/(m^2 K) to 0.5 K) makes the temperature vary over the contact face.
+    """
+    return ThermalProblem(
+        scene,
+        {"block_A": ThermalMaterial(1.0), "block_B": ThermalMaterial(10.0)},
+        {"contact": ThermalContact(h)},
+        [Temperature("left", 1.0), Convection("right", 20.0, 0.0), Convection("front", 5.0, 0.5)],
     )
 
 

@@ -19,6 +19,7 @@ above the tolerance, the correction is repeated (iterative refinement).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -143,6 +144,7 @@ def solve_interface_krylov(
     coarse: bool = True,
     max_iterations: int = 500,
     max_refinements: int = 5,
+    monitor: Callable[[int, dict[str, Vector]], None] | None = None,
 ) -> KrylovResult:
     """Solve the master problem of every interface at once by preconditioned CG.
 
@@ -158,6 +160,8 @@ def solve_interface_krylov(
         coarse: Add the coarse correction (one unknown per body).
         max_iterations: CG iterations allowed per refinement step.
         max_refinements: Correction steps allowed (the first one usually suffices).
+        monitor: Called after every CG iteration with the running count and the master
+            values [K] of the iterate (its time is the caller's to exclude).
 
     Raises:
         SubdomainConvergenceError: CG failed or the true residual did not reach ``rtol``.
@@ -180,6 +184,18 @@ def solve_interface_krylov(
     ksp.getPC().setPythonContext(_Shell(system.precondition))
     ksp.setFromOptions()
     rhs, delta = operator.createVecs()
+    if monitor is not None:
+
+        def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
+            if iteration == 0:
+                return
+            built = ksp.buildSolution()
+            step = np.concatenate(comm.allgather(built.getArray(readonly=True)))
+            built.destroy()
+            done = sum(result.krylov_iterations or [])
+            monitor(done + iteration, {k: masters[k] + step[s] for k, s in system.slices.items()})
+
+        ksp.setMonitor(watch)
     try:
         scales: dict[str, float] = {}
         for step in range(max_refinements + 1):

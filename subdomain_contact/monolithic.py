@@ -9,7 +9,9 @@ layers merged, so the two must agree to solver precision.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -20,17 +22,22 @@ from petsc4py import PETSc
 from subdomain_contact.blocks import BodyBlocks
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp
 
-__all__ = ["MonolithicResult", "solve_monolithic"]
+__all__ = ["CG_GAMG", "Monitor", "MonolithicResult", "solve_monolithic"]
 
 
 @dataclass
 class MonolithicResult:
-    """Temperatures [K] per body, master values [K] per interface, and the solve time [s]."""
+    """Solution of the merged system.
+
+    Temperatures [K] per body, master values [K] per interface, the solve time [s], the
+    system's size and the iterations of the solve (1 for a direct solve).
+    """
 
     temperatures: dict[str, npt.NDArray[np.float64]]
     masters: dict[str, npt.NDArray[np.float64]]
     seconds: float
     num_dofs: int
+    iterations: int = 1
 
 
 def _prolongation(block: BodyBlocks, k: str) -> PETSc.Mat:
@@ -51,10 +58,33 @@ def _prolongation(block: BodyBlocks, k: str) -> PETSc.Mat:
     return P
 
 
+#: Called after every iteration of an iterative solve with its number and body name ->
+#: the owned temperatures [K] of the iterate.
+Monitor = Callable[[int, dict[str, npt.NDArray[np.float64]]], None]
+
+#: Conjugate gradients preconditioned by smoothed-aggregation algebraic multigrid (PETSc's
+#: GAMG), to a relative residual of 1e-12: the monolithic iterative solve.
+CG_GAMG: Mapping[str, str] = MappingProxyType(
+    {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-12", "ksp_max_it": "5000"}
+)
+
+
 def solve_monolithic(
-    blocks: dict[str, BodyBlocks], options: dict[str, str] | None = None
+    blocks: dict[str, BodyBlocks],
+    options: Mapping[str, str] | None = None,
+    *,
+    refine: int = 0,
+    monitor: Monitor | None = None,
 ) -> MonolithicResult:
-    """Assemble the merged system from the bodies' blocks and solve it (MUMPS by default)."""
+    """Assemble the merged system from the bodies' blocks and solve it (MUMPS by default).
+
+    Args:
+        blocks: Every body's blocks (:func:`body_blocks`; no factorisation needed).
+        options: PETSc options of the solve: :data:`DIRECT` (default) or :data:`CG_GAMG`.
+        refine: Steps of iterative refinement after the solve (``x += K⁻¹ (b − K x)``).
+        monitor: Called after every iteration of an iterative solve (its time is the
+            caller's to exclude).
+    """
     start = time.perf_counter()
     bodies = list(blocks)
     neighbours = {
@@ -83,7 +113,8 @@ def solve_monolithic(
             rows[a][m], rows[m][a] = coupling, coupling.transpose(PETSc.Mat())
             MP = block.M_free[k].matMult(P)
             diagonal = P.transposeMatMult(MP)
-            diagonal.scale(block.half_links[k])
+            # an insulating contact (h̄ = 0) leaves its masters free: they are set to 0
+            diagonal.scale(block.half_links[k] or 1.0)
             made += [P, MP, coupling, rows[m][a], diagonal]
             lifted[m] = lifted.get(m, 0.0) + block.half_links[k] * _fixed_slave_flux(block, k, P)
             if rows[m][m] is None:
@@ -106,10 +137,28 @@ def solve_monolithic(
             for m, s in enumerate(layer_sizes, start=len(bodies))
         ]
     )
+    if monitor is not None:
+
+        def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
+            built = ksp.buildSolution()
+            parts = np.split(built.array, np.cumsum(sizes))
+            monitor(iteration, dict(zip(bodies, parts, strict=False)))
+            built.destroy()
+
+        ksp.setMonitor(watch)
     ksp.solve(b, x)
-    size = K.getSize()[0]
     if ksp.getConvergedReason() < 0:
-        raise RuntimeError(f"monolithic solve failed (reason {ksp.getConvergedReason()})")
+        reason = ksp.getConvergedReason()
+        destroy(*made, nest, K, ksp, b, x)
+        raise RuntimeError(f"monolithic solve failed (PETSc reason {reason})")
+    residual, correction = K.createVecs()
+    for _ in range(refine):
+        K.mult(x, residual)
+        residual.aypx(-1.0, b)
+        ksp.solve(residual, correction)
+        x.axpy(1.0, correction)
+    size = K.getSize()[0]
+    iterations = ksp.getIterationNumber()
     parts = np.split(x.array, np.cumsum(sizes + layer_sizes)[:-1])
     temperatures = dict(zip(bodies, parts[: len(bodies)], strict=True))
     temperatures = {name: part.copy() for name, part in temperatures.items()}
@@ -117,8 +166,8 @@ def solve_monolithic(
     for k, part in zip(interfaces, parts[len(bodies) :], strict=True):
         owner = next(blk for blk in blocks.values() if k in blk.layers)
         masters[k] = _replicate(owner.layers[k].V, part)
-    destroy(*made, nest, K, ksp, b, x)
-    return MonolithicResult(temperatures, masters, time.perf_counter() - start, size)
+    destroy(*made, nest, K, ksp, b, x, residual, correction)
+    return MonolithicResult(temperatures, masters, time.perf_counter() - start, size, iterations)
 
 
 def _fixed_slave_flux(block: BodyBlocks, k: str, P: PETSc.Mat) -> np.ndarray:

@@ -16,6 +16,7 @@ which keeps Newton's quadratic convergence.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -233,14 +234,15 @@ class _InterfaceShell:
 
 
 class MonolithicLinearSolver:
-    """``J Δ = b`` by a direct solve (MUMPS) of the merged matrix: the reference.
+    """``J Δ = b`` by a solve of the merged matrix: the reference (MUMPS by default).
 
     Args:
         system: The coupled system (its Jacobian assembled before :meth:`setup`).
+        options: PETSc options of the solve (an iterative one stops at its own ``ksp_rtol``).
     """
 
-    def __init__(self, system: CoupledSystem) -> None:
-        self.system = system
+    def __init__(self, system: CoupledSystem, options: Mapping[str, str] = DIRECT) -> None:
+        self.system, self.options = system, options
         self.K: PETSc.Mat | None = None
         self.ksp: PETSc.KSP | None = None
 
@@ -274,7 +276,7 @@ class MonolithicLinearSolver:
         nest = PETSc.Mat().createNest(blocks, comm=system.comm)
         destroy(self.K, self.ksp)
         self.K = nest.convert("aij", out=PETSc.Mat())
-        self.ksp = make_ksp(self.K, "sc_coupled_monolithic_", DIRECT)
+        self.ksp = make_ksp(self.K, "sc_coupled_monolithic_", self.options)
         destroy(nest, *made)
 
     def _prolongation(self, body: CoupledBody, k: str) -> PETSc.Mat:
@@ -299,11 +301,12 @@ class MonolithicLinearSolver:
         self.ksp.solve(rhs, x)
         if self.ksp.getConvergedReason() < 0:
             raise InnerConvergenceError(
-                f"monolithic direct solve failed (reason {self.ksp.getConvergedReason()})"
+                f"monolithic linear solve failed (PETSc reason {self.ksp.getConvergedReason()}"
+                f" after {self.ksp.getIterationNumber()} iterations)"
             )
         out = x.array.copy()
         destroy(rhs, x)
-        return out, 1
+        return out, max(1, self.ksp.getIterationNumber())
 
     def __del__(self) -> None:
         """Destroy the merged matrix and its factorisation."""
@@ -366,8 +369,9 @@ class _Callbacks:
     preconditioner that runs the inner solve (``apply``).
     """
 
-    def __init__(self, system, linear, rtol: float, max_it: int) -> None:
+    def __init__(self, system, linear, rtol: float, max_it: int, monitor=None) -> None:
         self.system, self.linear, self.rtol, self.max_it = system, linear, rtol, max_it
+        self.monitor = monitor
         self.result = NewtonResult()
         self.scale: dict[str, float] = {}
         self.eta = 1e-4
@@ -407,6 +411,9 @@ class _Callbacks:
         total = float(np.sqrt(sum(v**2 for v in fields.values())))
         self.result.history.append(NewtonStep(it, total, fields, self.pending_rounds))
         self.pending_rounds = 0
+        if self.monitor is not None:
+            self.system.set_state(snes.getSolution())
+            self.monitor(it)
         if not np.isfinite(total):
             return reasons.DIVERGED_FNORM_NAN
         for name, value in fields.items():
@@ -439,6 +446,8 @@ def solve_newton(
     line_search: str = "basic",
     max_rounds: int = 100,
     krylov: bool | None = None,
+    linear_options: Mapping[str, str] | None = None,
+    monitor: Callable[[int], None] | None = None,
 ) -> NewtonResult:
     """Newton's method on the coupled system, from its current state.
 
@@ -462,6 +471,9 @@ def solve_newton(
         max_rounds: Subdomain rounds allowed per linear solve.
         krylov: GMRES on the interface problem (see :class:`SubdomainLinearSolver`); by
             default where some body touches several interfaces.
+        linear_options: PETSc options of the monolithic linear solve (default: MUMPS).
+        monitor: Called with the iteration number at every iterate, the system holding it
+            (its time is the caller's to exclude).
 
     Raises:
         NewtonConvergenceError: Newton (or an inner solve) failed; the error holds the history.
@@ -474,10 +486,10 @@ def solve_newton(
             system, corrector=corrector, max_rounds=max_rounds, krylov=krylov
         )
     elif linear == "monolithic":
-        solver = MonolithicLinearSolver(system)
+        solver = MonolithicLinearSolver(system, linear_options or DIRECT)
     else:
         raise ValueError(f"linear = {linear!r}: 'subdomain' or 'monolithic'")
-    callbacks = _Callbacks(system, solver, rtol, max_it)
+    callbacks = _Callbacks(system, solver, rtol, max_it, monitor)
     x, f = system.create_vector(), system.create_vector()
     system.get_state(x)
     callbacks.scale = _cold_residuals(system, f)

@@ -26,16 +26,21 @@ def make_ksp(
     With ``setup=False`` the factorisation waits for the first ``setUp`` or solve (for a
     matrix not assembled yet).
 
-    Options already in the PETSc database under ``prefix`` (from the command line) win.
+    Options already in the PETSc database under ``prefix`` (from the command line) win;
+    ``options`` are removed from the database once read, so that the next KSP of the same
+    prefix gets its own.
     """
     database = PETSc.Options()
+    added = [prefix + key for key in options if not database.hasName(prefix + key)]
     for key, value in options.items():
-        if not database.hasName(prefix + key):
+        if prefix + key in added:
             database.setValue(prefix + key, value)
     ksp = PETSc.KSP().create(A.getComm())
     ksp.setOptionsPrefix(prefix)
     ksp.setOperators(A)
     ksp.setFromOptions()
+    for name in added:
+        database.delValue(name)
     if setup:
         ksp.setUp()
     return ksp

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import dolfinx
@@ -23,9 +24,11 @@ from subdomain_contact.solvers import Reaper
 from subdomain_contact.thermal import ThermalProblem, body_forms
 
 __all__ = [
+    "RoundMonitor",
     "SubdomainConvergenceError",
     "SubdomainResult",
     "ThermalSubdomains",
+    "body_blocks",
     "relative_to_scale",
 ]
 
@@ -60,6 +63,30 @@ class SubdomainConvergenceError(RuntimeError):
         self.result = result
 
 
+def body_blocks(
+    problem: ThermalProblem, *, factorise: bool = True
+) -> tuple[dict[str, MasterLayer], dict[str, BodyBlocks]]:
+    """Every interface's master layer, and the blocks of the bodies this rank's group holds.
+
+    ``factorise=False`` when the blocks only feed :func:`solve_monolithic`.
+    """
+    scene = problem.scene
+    layers = {k: master_layer(i) for k, i in scene.interfaces.items()}
+    blocks = {}
+    for name, body in scene.bodies.items():
+        if not scene.is_local(name):
+            continue
+        mine = {i.name: layers[i.name] for i in scene.interfaces_of(name)}
+        halves = {k: problem.half_link(k) for k in mine}
+        forms = body_forms(problem, body)
+        blocks[name] = BodyBlocks(name, forms, body.facet_tags, mine, halves, factorise=factorise)
+    return layers, blocks
+
+
+#: Called after every round with its number and body name -> temperature of that round.
+RoundMonitor = Callable[[int, dict[str, dolfinx.fem.Function]], None]
+
+
 class ThermalSubdomains:
     """Thermal contact solved body by body through master layers.
 
@@ -76,26 +103,20 @@ class ThermalSubdomains:
         self.problem = problem
         self.corrector = corrector or Series()
         scene = problem.scene
-        self.layers: dict[str, MasterLayer] = {
-            k: master_layer(i) for k, i in scene.interfaces.items()
-        }
-        self.blocks: dict[str, BodyBlocks] = {}  # the bodies this rank's group solves
-        for name, body in scene.bodies.items():
-            if not scene.is_local(name):
-                continue
-            mine = {i.name: self.layers[i.name] for i in scene.interfaces_of(name)}
-            halves = {k: problem.half_link(k) for k in mine}
-            forms = body_forms(problem, body)
-            self.blocks[name] = BodyBlocks(name, forms, body.facet_tags, mine, halves)
+        self.layers, self.blocks = body_blocks(problem)  # the bodies this rank's group solves
+        insulating = {k for k, c in problem.contacts.items() if c.conductance == 0}
         parts = self._everywhere(
             {
                 (k, name): self.corrector.part(k, block)
                 for name, block in self.blocks.items()
                 for k in block.layers
+                if k not in insulating
             }
         )
-        self.operators = {
-            k: self.corrector.combine(k, i.bodies, (parts[k, i.bodies[0]], parts[k, i.bodies[1]]))
+        self.operators = {  # an insulating contact's master residual is zero: no correction
+            k: np.zeros((self.layers[k].size,) * 2)
+            if k in insulating
+            else self.corrector.combine(k, i.bodies, (parts[k, i.bodies[0]], parts[k, i.bodies[1]]))
             for k, i in scene.interfaces.items()
         }
         self.setup_seconds = time.perf_counter() - start
@@ -147,6 +168,7 @@ class ThermalSubdomains:
         rtol: float = 1e-10,
         max_rounds: int = 50,
         divergence: float = 1e6,
+        monitor: RoundMonitor | None = None,
     ) -> SubdomainResult:
         """Iterate until ``‖Σ_α r_k^α‖ ≤ rtol · flux scale`` on every interface k.
 
@@ -158,6 +180,8 @@ class ThermalSubdomains:
             rtol: Tolerance on the master residual relative to the flux scale.
             max_rounds: Body-solve rounds allowed.
             divergence: Stop when the relative residual grows past this multiple of its first value.
+            monitor: Called after every round, before the correction (its time is the
+                caller's to exclude).
 
         Raises:
             SubdomainConvergenceError: Diverged, non-finite or not converged in ``max_rounds``;
@@ -176,6 +200,8 @@ class ThermalSubdomains:
             result.rounds, result.seconds = rounds, time.perf_counter() - start
             result.history.append(relative)
             logger.info("round %d: relative master residual %.3e", rounds, relative)
+            if monitor is not None:
+                monitor(rounds, temperatures)
             if not np.isfinite(relative) or relative > divergence * result.history[0]:
                 raise SubdomainConvergenceError(
                     f"{self.corrector.name}: the subdomain iteration diverged at round {rounds} "

@@ -37,7 +37,11 @@ class ThermalMaterial:
 
 @dataclass(frozen=True)
 class ThermalContact:
-    """Thermal contact conductance h [W/(m^2 K)] of a whole interface (never h̄ = 2h)."""
+    """Thermal contact conductance h [W/(m^2 K)] of a whole interface (never h̄ = 2h).
+
+    h = 0 is an insulating contact: the bodies do not exchange heat and the master
+    temperatures, which nothing defines, are left at 0.
+    """
 
     conductance: float
 
@@ -94,7 +98,12 @@ class ThermalProblem:
             check_finite(m.conductivity, f"body '{name}': conductivity", positive=True)
             check_finite(m.source, f"body '{name}': source")
         for name, c in self.contacts.items():
-            check_finite(c.conductance, f"interface '{name}': conductance h", positive=True)
+            check_finite(c.conductance, f"interface '{name}': conductance h")
+            if c.conductance < 0:
+                raise ValueError(
+                    f"interface '{name}': conductance h = {c.conductance!r}: must be >= 0 "
+                    "(0: an insulating contact)"
+                )
         every = set().union(*(b.boundaries for b in self.scene.bodies.values()))
         for bc in self.conditions:
             if bc.boundary not in every or bc.boundary in self.scene.interfaces:
@@ -107,6 +116,34 @@ class ThermalProblem:
                     check_finite(getattr(bc, field), f"boundary '{bc.boundary}': {field}")
             if isinstance(bc, Convection) and bc.coefficient < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
+        self._check_anchored()
+
+    def _check_anchored(self) -> None:
+        """Refuse bodies whose temperature no condition fixes, even through contacts.
+
+        A group of bodies joined by conducting contacts (h > 0) needs a temperature or a
+        convection condition somewhere; without one its temperature is defined only up to
+        a constant and every solver would return an arbitrary level.
+        """
+        scene = self.scene
+        anchors = {
+            bc.boundary
+            for bc in self.conditions
+            if isinstance(bc, Temperature) or (isinstance(bc, Convection) and bc.coefficient > 0)
+        }
+        group = {name: {name} for name in scene.bodies}
+        for k, interface in scene.interfaces.items():
+            if self.contacts[k].conductance > 0:
+                merged = group[interface.bodies[0]] | group[interface.bodies[1]]
+                for name in merged:
+                    group[name] = merged
+        for members in {frozenset(g) for g in group.values()}:
+            if not any(anchors & set(scene.bodies[n].boundaries) for n in members):
+                raise ValueError(
+                    f"{scene.source}: bodies {sorted(members)} have no temperature or "
+                    "convection condition and no conducting contact (h > 0) leads to one: "
+                    "their temperature is defined only up to a constant"
+                )
 
     def half_link(self, interface: str) -> float:
         """Half-link coefficient h̄ = 2 h [W/(m^2 K)] of an interface (METHOD.md §2)."""

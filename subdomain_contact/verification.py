@@ -8,8 +8,9 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
+from scipy.spatial import cKDTree
 
-__all__ = ["relative_nodal_error"]
+__all__ = ["NodalReference", "relative_nodal_error"]
 
 Values = npt.NDArray[np.float64]
 
@@ -18,6 +19,7 @@ def relative_nodal_error(
     spaces: Mapping[str, dolfinx.fem.FunctionSpace],
     values: Mapping[str, Values],
     reference: Mapping[str, Callable[[Values], Values] | Values],
+    comm: MPI.Comm | None = None,
 ) -> float:
     """Max |u − u_ref| over the owned nodes of every body, divided by the range of u_ref.
 
@@ -26,8 +28,10 @@ def relative_nodal_error(
         values: Body name -> owned nodal values.
         reference: Body name -> exact function of the node coordinates ``(n, 3)``, or
             owned nodal values of a reference solution.
+        comm: Where to reduce (default: the first body's mesh communicator; give the
+            scene's when bodies live on different rank groups).
     """
-    comm = next(iter(spaces.values())).mesh.comm
+    comm = comm or next(iter(spaces.values())).mesh.comm
     worst, low, high = 0.0, np.inf, -np.inf
     for name, V in spaces.items():
         n = V.dofmap.index_map.size_local
@@ -39,3 +43,44 @@ def relative_nodal_error(
     worst = comm.allreduce(worst, op=MPI.MAX)
     spread = comm.allreduce(high, op=MPI.MAX) - comm.allreduce(low, op=MPI.MIN)
     return worst / spread if spread > 0 else worst
+
+
+class NodalReference:
+    """A reference solution that any distribution of the same meshes can be compared with.
+
+    Every rank keeps every body's node coordinates and values (gathered once), so a scene
+    loaded with another placement, or on other ranks, finds its reference values by
+    coordinates.
+
+    Args:
+        spaces: Body name -> P1 space of the reference.
+        values: Body name -> owned nodal values of the reference.
+    """
+
+    def __init__(
+        self, spaces: Mapping[str, dolfinx.fem.FunctionSpace], values: Mapping[str, Values]
+    ) -> None:
+        self.nodes, self.trees, self.values = {}, {}, {}
+        for name, V in spaces.items():
+            n = V.dofmap.index_map.size_local
+            comm = V.mesh.comm
+            points = np.concatenate(comm.allgather(V.tabulate_dof_coordinates()[:n]))
+            self.values[name] = np.concatenate(comm.allgather(np.asarray(values[name])[:n]))
+            self.trees[name] = cKDTree(points)
+            self.nodes[name] = points
+
+    def at(self, spaces: Mapping[str, dolfinx.fem.FunctionSpace]) -> dict[str, Values]:
+        """Reference values at the owned nodes of ``spaces`` (same meshes, any distribution).
+
+        Raises:
+            ValueError: A node has no reference node at its place (not the same mesh).
+        """
+        out = {}
+        for name, V in spaces.items():
+            points = V.tabulate_dof_coordinates()[: V.dofmap.index_map.size_local]
+            distance, index = self.trees[name].query(points)
+            extent = float(np.ptp(self.nodes[name], axis=0).max())
+            if distance.size and distance.max() > 1e-9 * extent:
+                raise ValueError(f"body '{name}': the reference was computed on another mesh")
+            out[name] = self.values[name][index]
+        return out

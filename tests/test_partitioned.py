@@ -4,7 +4,7 @@ import pytest
 
 import subdomain_contact as sc
 from subdomain_contact.cases import two_plates
-from subdomain_contact.partitioned import solve_robin_robin
+from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
 from subdomain_contact.verification import relative_nodal_error
 
 
@@ -50,3 +50,37 @@ def test_robin_robin_refuses_more_than_two_bodies():
     problem = stack(stack_scene(3, 2, 2), h=1.0)
     with pytest.raises(ValueError, match="two bodies, one interface"):
         solve_robin_robin(problem)
+
+
+def cooled(scene, h):
+    base = two_plates(scene, h=h).problem
+    extra = [*base.conditions, sc.Convection("top", 5.0, 2.0)]
+    problem = sc.ThermalProblem(scene, base.materials, base.contacts, extra)
+    series = sc.ThermalSubdomains(problem).solve(rtol=1e-12)
+    return problem, {n: T.x.array.copy() for n, T in series.temperatures.items()}
+
+
+@pytest.mark.parametrize("acceleration", ["aitken", "iqn-ils"])
+def test_dirichlet_neumann_reaches_the_exact_solution(plates, acceleration):
+    case = two_plates(plates, h=1.0, k_a=2.0, source_a=3.0)
+    result = solve_dirichlet_neumann(case.problem, acceleration=acceleration)
+    assert result.converged and result.iterations == 3
+    assert error(result, case.exact_by_body) < 1e-12
+
+
+def test_dirichlet_neumann_stays_exact_at_a_stiff_contact_where_robin_robin_is_refused(plates):
+    problem, reference = cooled(plates, 1e10)
+    dn = solve_dirichlet_neumann(problem, acceleration="aitken")
+    assert dn.converged and dn.iterations <= 4 and error(dn, reference) < 1e-12
+    rr = solve_robin_robin(problem, acceleration="aitken", max_iterations=60)
+    # its interface temperatures stop changing, but the heat balance says it is wrong
+    assert min(rr.history) < 1e-12 and rr.balance > 1e-6 and not rr.converged
+
+
+def test_a_diverging_coupling_stops_and_says_so():
+    from subdomain_contact.cases import two_plates_scene
+
+    scene = two_plates_scene(4, 4)
+    problem = two_plates(scene, h=1e3, k_b=10.0).problem  # DN unrelaxed-ish: B stiffer than A
+    result = solve_dirichlet_neumann(problem, acceleration="constant", relaxation=1.0)
+    assert result.diverged and not result.converged and result.iterations < 200

@@ -112,13 +112,33 @@ def test_floating_bodies_with_series_corrector(plates):
     )
     result = sc.ThermalSubdomains(problem).solve()
     assert result.rounds <= 2
-    with pytest.raises(ValueError, match="singular"):
-        sc.ThermalSubdomains(
-            sc.ThermalProblem(
-                plates,
-                problem.materials,
-                problem.contacts,
-                [sc.HeatFlux("left", 10.0), sc.HeatFlux("right", -10.0)],
-            ),
-            sc.Method2(),
+    # nothing fixes the level at all: refused before any solver sees a singular matrix
+    with pytest.raises(ValueError, match="defined only up to a constant"):
+        sc.ThermalProblem(
+            plates,
+            problem.materials,
+            problem.contacts,
+            [sc.HeatFlux("left", 10.0), sc.HeatFlux("right", -10.0)],
+        )
+
+
+def test_an_insulating_contact_separates_the_plates(plates):
+    case = two_plates(plates, h=0.0, k_a=2.0, source_a=3.0)
+    solver = sc.ThermalSubdomains(case.problem)
+    result = solver.solve()
+    spaces = {n: b.V for n, b in solver.blocks.items()}
+    values = {n: T.x.array for n, T in result.temperatures.items()}
+    assert result.rounds == 1  # nothing crosses: the first round is the answer
+    assert relative_nodal_error(spaces, values, case.exact_by_body) < 1e-12
+    reference = sc.solve_monolithic(solver.blocks)
+    assert relative_nodal_error(spaces, reference.temperatures, case.exact_by_body) < 1e-12
+
+
+def test_a_scene_that_nothing_holds_is_refused(plates):
+    with pytest.raises(ValueError, match=r"\['plate_B'\] have no temperature"):
+        sc.ThermalProblem(
+            plates,
+            {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
+            {"contact": sc.ThermalContact(0.0)},  # insulating: B is on its own
+            [sc.Temperature("left", 1.0), sc.HeatFlux("right", 2.0)],
         )

@@ -1,0 +1,485 @@
+# # Error against run time: every method on the same discrete problems
+#
+# A user choosing between this code, a monolithic solver and a partitioned coupling tool wants
+# to see, on one problem, what accuracy each approach reaches for what time. This demo runs
+# every method on the same discrete systems and records, iteration by iteration, the wall
+# time and the error against the best available reference:
+#
+# * **monolithic MUMPS** (one direct solve of the merged system) and **monolithic CG + GAMG**;
+# * the **subdomain iteration** with each corrector (series, method 1, method 2, partial
+#   condensation) and **interface CG** preconditioned by partial condensation;
+# * the **partitioned couplings** a preCICE user would pick: Dirichlet–Neumann and
+#   Robin–Robin, each with constant relaxation (ω = 0.5), Aitken and IQN-ILS;
+# * for the multiphysics scene, **Newton** with a monolithic MUMPS or GMRES + GAMG linear
+#   solve, or with the subdomain iteration inside (exact or method-1 corrector).
+#
+# Problems: the two plates (top cooled so that the temperature varies along the contact,
+# k = 1 and 10 W/(m K), h = 1e3 W/(m² K)) up to about a million DOFs; the 8-body stack
+# (floating bodies); the squeezed Joule bars (temperature, potential, displacement, p- and
+# T-dependent laws); and two blocks in 3D (tetrahedra).
+#
+# The reference of a thermal problem is the monolithic MUMPS solve polished by two steps of
+# iterative refinement; of the multiphysics one, monolithic Newton to a relative residual of
+# 1e-13. Error: max nodal |u − u_ref| over all bodies / range of u_ref (multiphysics: the
+# worst field). Time: wall time from the assembly of the bodies to the iterate, the time
+# spent measuring errors excluded. Peak memory: the growth of the resident set (VmHWM) during
+# the method, summed over ranks. Under `mpiexec -n 2` the subdomain methods give each body
+# its own rank (`placement="groups"`); monolithic and partitioned solves spread every body
+# over both ranks.
+#
+# Run `python demos/demo_error_vs_runtime.py` (about 40 minutes on one core; `--small` for
+# the tests). Output in `out_error_vs_runtime/`: `iterations.csv` (every iterate),
+# `summary.csv`, `results.md` (time to 1e-8 as a ratio to MUMPS, scaling exponents),
+# `error_vs_time_<problem>.png`, `time_vs_dofs.png` and `report.json`.
+
+import argparse
+import csv
+import ctypes
+import gc
+import json
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+import matplotlib
+import numpy as np
+from mpi4py import MPI
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+import subdomain_contact as sc
+from subdomain_contact.cases import (
+    bars_scene,
+    blocks3d_scene,
+    heated_blocks,
+    squeezed_joule_bars,
+    stack,
+    stack_scene,
+    two_plates,
+    two_plates_scene,
+)
+from subdomain_contact.coupled import CoupledSystem
+from subdomain_contact.newton import solve_newton
+from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
+from subdomain_contact.verification import NodalReference, relative_nodal_error
+
+parser = argparse.ArgumentParser(description=__doc__)
+parser.add_argument("--small", action="store_true", help="a minute, for the tests")
+parser.add_argument("--out", type=Path, default=Path("out_error_vs_runtime"))
+parser.add_argument(
+    "--problems", nargs="+", default=["two_plates", "stack", "joule_bars", "blocks3d"]
+)
+parser.add_argument("--max-dofs", type=float, default=1.1e6, help="skip larger meshes")
+args = parser.parse_args()
+comm = MPI.COMM_WORLD
+started = time.perf_counter()
+TARGET = 1e-8  # the error the time ratios are quoted at
+placement = "groups" if comm.size > 1 else "shared"
+
+
+def say(*text: object) -> None:
+    if comm.rank == 0:
+        print(*text, flush=True)
+
+
+# ## Measuring: a clock that stops while errors are measured, and the peak resident set
+
+
+class Trace:
+    """Iterates of one method: (iteration, seconds, error), the clock paused for the error.
+
+    ``error`` maps what the method's monitor passes to the error; a method sets it once it
+    knows its spaces (inside :meth:`pause`).
+    """
+
+    def __init__(self) -> None:
+        self.error, self.points = None, []
+        comm.Barrier()
+        self.start, self.paused = time.perf_counter(), 0.0
+
+    def now(self) -> float:
+        return time.perf_counter() - self.start - self.paused
+
+    @contextmanager
+    def pause(self):
+        stopped = time.perf_counter()
+        yield
+        self.paused += time.perf_counter() - stopped
+
+    def record(self, iteration: int, state) -> None:
+        seconds = self.now()
+        with self.pause():
+            self.points.append((iteration, seconds, self.error(state)))
+
+
+def reset_peak_memory() -> float:
+    """Reset this process's VmHWM to its current resident set; return that set [MB].
+
+    Memory that earlier methods freed is first handed back to the system (``malloc_trim``),
+    so that a method's growth is not hidden by heap the allocator kept.
+    """
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        return float("nan")
+    return _status("VmRSS")
+
+
+def _status(key: str) -> float:
+    """A /proc/self/status entry [MB] (NaN where there is none)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(key):
+                return float(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+rows: list[dict] = []  # one per (problem, size, method)
+iterates: list[dict] = []  # one per iterate
+
+
+def run(problem: str, dofs: int, method: str, solve) -> None:
+    """Run ``solve(trace)``; keep its iterates, its summary and its failure, if any."""
+    base = reset_peak_memory()
+    trace = Trace()
+    try:
+        note = solve(trace) or ""
+    except (RuntimeError, ValueError) as failure:  # kept in the table: never silent
+        note = str(failure).splitlines()[0][:100]
+    seconds = trace.now()
+    peak = comm.allreduce(_status("VmHWM") - base, op=MPI.SUM)
+    reached = next((s for _, s, e in trace.points if e <= TARGET), None)
+    last = trace.points[-1] if trace.points else (0, seconds, float("nan"))
+    rows.append(
+        {
+            "problem": problem,
+            "dofs": dofs,
+            "ranks": comm.size,
+            "method": method,
+            "iterations": last[0],
+            "seconds": seconds,
+            "final_error": last[2],
+            "seconds_to_target": reached,
+            "peak_memory_mb": peak,
+            "note": note,
+        }
+    )
+    iterates.extend(
+        {
+            "problem": problem,
+            "dofs": dofs,
+            "method": method,
+            "iteration": i,
+            "seconds": s,
+            "error": e,
+        }
+        for i, s, e in trace.points
+    )
+    to = "—" if reached is None else f"{reached:.3g} s"
+    say(
+        f"  {method:24s} {last[0]:4d} its {seconds:8.2f} s  error {last[2]:.1e}  "
+        f"to {TARGET:g}: {to:>9s}  peak {peak:7.1f} MB  {note}"
+    )
+
+
+# ## Thermal problems: every method
+
+
+def nodal_values(values: dict) -> dict:
+    """Body name -> nodal array, from Functions or arrays."""
+    return {n: v.x.array if hasattr(v, "x") else v for n, v in values.items()}
+
+
+def thermal_methods(name: str, make_scene, make_problem) -> None:
+    """Every method on one thermal problem (partitioned couplings only for two bodies)."""
+    shared = make_problem(make_scene("shared"))
+    _, blocks = sc.body_blocks(shared, factorise=False)
+    exact = sc.solve_monolithic(blocks, refine=2)
+    reference = NodalReference({n: b.V for n, b in blocks.items()}, exact.temperatures)
+    dofs, bodies = exact.num_dofs, len(blocks)
+    del blocks
+    say(f"{name}: {dofs} DOFs, {bodies} bodies, {comm.size} rank(s)")
+
+    def error_on(spaces):
+        ref = reference.at(spaces)
+        return lambda values: relative_nodal_error(spaces, nodal_values(values), ref, comm)
+
+    def monolithic(options):
+        def solve(trace):
+            _, blocks = sc.body_blocks(shared, factorise=False)
+            with trace.pause():
+                trace.error = error_on({n: b.V for n, b in blocks.items()})
+            monitor = None if options is None else trace.record
+            result = sc.solve_monolithic(blocks, options, monitor=monitor)
+            if options is None:
+                trace.record(1, result.temperatures)
+            return "" if options is None else f"{result.iterations} CG iterations"
+
+        return solve
+
+    run(name, dofs, "monolithic MUMPS", monolithic(None))
+    run(name, dofs, "monolithic CG+GAMG", monolithic(sc.CG_GAMG))
+
+    problem = make_problem(make_scene(placement))
+
+    def subdomain(corrector, iterate):
+        def solve(trace):
+            solver = sc.ThermalSubdomains(problem, corrector)
+            with trace.pause():
+                trace.error = error_on({n: b.V for n, b in solver.blocks.items()})
+            return iterate(solver, trace)
+
+        return solve
+
+    def fixed_point(solver, trace):
+        solver.solve(rtol=1e-12, max_rounds=100, monitor=lambda i, T: trace.record(i, T))
+
+    def interface_cg(solver, trace):
+        def monitor(iteration, masters):
+            with trace.pause():
+                solver.round(masters)  # the bodies at these masters, for the error only
+            trace.record(iteration, {n: b.T for n, b in solver.blocks.items()})
+
+        result = sc.solve_interface_krylov(solver, rtol=1e-12, dense_limit=0, monitor=monitor)
+        return f"{sum(result.krylov_iterations)} CG iterations"
+
+    partial = sc.PartialCondensation(layers=4)
+    for corrector in [sc.Series(), sc.Method1(), sc.Method2(), partial]:
+        run(name, dofs, f"subdomain {corrector.name}", subdomain(corrector, fixed_point))
+    run(name, dofs, "interface CG (partial)", subdomain(partial, interface_cg))
+    if bodies != 2:
+        return  # the partitioned couplings take two bodies
+
+    def partitioned(couple, acceleration):
+        def solve(trace):
+            def monitor(iteration, temperatures):
+                if trace.error is None:
+                    with trace.pause():
+                        trace.error = error_on(
+                            {n: T.function_space for n, T in temperatures.items()}
+                        )
+                trace.record(iteration, temperatures)
+
+            result = couple(
+                shared,
+                acceleration=acceleration,
+                rtol=1e-12,
+                max_iterations=100,
+                monitor=monitor,
+            )
+            if result.diverged:
+                return f"diverged at iteration {result.iterations}"
+            return "" if result.converged else "no convergence in 100 iterations"
+
+        return solve
+
+    for label, couple in (("DN", solve_dirichlet_neumann), ("RR", solve_robin_robin)):
+        for acceleration in ("constant", "aitken", "iqn-ils"):
+            run(name, dofs, f"{label} {acceleration}", partitioned(couple, acceleration))
+
+
+# ## The multiphysics scene: Newton outside
+
+
+def newton_methods(cells: tuple[int, int]) -> None:
+    """Monolithic and subdomain Newton on the squeezed Joule bars (every field)."""
+    scene = bars_scene(*cells)
+    reference_system = CoupledSystem(squeezed_joule_bars(scene))
+    solve_newton(reference_system, linear="monolithic", rtol=1e-13, max_it=40)
+    reference = reference_system.state()
+    dofs = reference.getSize()
+    say(f"joule_bars: {dofs} DOFs (T, φ, u), {comm.size} rank(s)")
+
+    def newton(linear: str, **options):
+        def solve(trace):
+            system = CoupledSystem(squeezed_joule_bars(scene))
+            trace.error = lambda _: max(system.difference(system.state(), reference).values())
+            result = solve_newton(
+                system,
+                linear=linear,
+                rtol=1e-12,
+                max_it=40,
+                monitor=lambda it: trace.record(it, None),
+                **options,
+            )
+            rounds = sum(step.inner_rounds for step in result.history)
+            return f"{rounds} inner {'rounds' if linear == 'subdomain' else 'solves/its'}"
+
+        return solve
+
+    gmres = {"ksp_type": "gmres", "pc_type": "gamg", "ksp_rtol": "1e-12", "ksp_max_it": "2000"}
+    problem = "joule_bars"
+    run(problem, dofs, "Newton, monolithic MUMPS", newton("monolithic"))
+    run(problem, dofs, "Newton, monolithic GMRES+GAMG", newton("monolithic", linear_options=gmres))
+    run(problem, dofs, "Newton, subdomain exact", newton("subdomain"))
+    run(problem, dofs, "Newton, subdomain method1", newton("subdomain", corrector="method1"))
+
+
+# ## The runs
+
+
+def cooled_plates(scene: sc.Scene) -> sc.ThermalProblem:
+    """The two plates, k = 1 and 10 W/(m K), h = 1e3 W/(m² K), the top cooled."""
+    base = two_plates(scene, h=1e3, k_b=10.0).problem
+    cooling = sc.Convection("top", 5.0, 2.0)
+    return sc.ThermalProblem(scene, base.materials, base.contacts, [*base.conditions, cooling])
+
+
+sizes = {
+    "two_plates": [8, 16] if args.small else [64, 128, 256, 512, 706],
+    "stack": [4] if args.small else [8, 16, 32, 64],
+    "joule_bars": [(16, 3)] if args.small else [(16, 3), (32, 6), (64, 12), (128, 25)],
+    "blocks3d": [0.1] if args.small else [0.05, 0.025, 0.0125],
+}
+plates_dofs = {n: 2 * (n + 1) ** 2 + (n + 1) for n in sizes["two_plates"]}
+for problem in args.problems:
+    for size in sizes[problem]:
+        if problem == "two_plates":
+            if plates_dofs[size] > args.max_dofs:
+                continue
+            thermal_methods(
+                problem,
+                lambda where, n=size: two_plates_scene(n, n, placement=where),
+                cooled_plates,
+            )
+        elif problem == "stack":
+            thermal_methods(
+                problem,
+                lambda where, n=size: stack_scene(8, n, n, placement=where),
+                lambda scene: stack(scene, h=1e2),
+            )
+        elif problem == "blocks3d":
+            thermal_methods(
+                problem, lambda where, s=size: blocks3d_scene(s, placement=where), heated_blocks
+            )
+        else:
+            newton_methods(size)
+
+# ## Output: CSV, plots, the markdown table and the scaling exponents
+
+
+def exponent(points: list[tuple[int, float]]) -> float | None:
+    """Least-squares slope of log(time) against log(DOFs) (None with fewer than 3 sizes)."""
+    if len(points) < 3:
+        return None
+    dofs, seconds = np.array(points).T
+    return float(np.polyfit(np.log(dofs), np.log(seconds), 1)[0])
+
+
+if comm.rank == 0:
+    args.out.mkdir(parents=True, exist_ok=True)
+    for path, table in (("summary.csv", rows), ("iterations.csv", iterates)):
+        with open(args.out / path, "w", newline="") as stream:
+            writer = csv.DictWriter(stream, fieldnames=list(table[0]))
+            writer.writeheader()
+            writer.writerows(table)
+    problems = list(dict.fromkeys(r["problem"] for r in rows))
+    exponents = {}
+    lines = [
+        f"# Error against run time ({comm.size} rank{'s' if comm.size > 1 else ''})",
+        "",
+        f"Time to a relative error of {TARGET:g} (from assembly, errors not counted), as a",
+        "ratio to the monolithic MUMPS solve of the same size in the same run; '—': never",
+        "reached. Produced by `demos/demo_error_vs_runtime.py`.",
+    ]
+    for problem in problems:
+        mine = [r for r in rows if r["problem"] == problem]
+        methods = list(dict.fromkeys(r["method"] for r in mine))
+        baseline = "Newton, monolithic MUMPS" if problem == "joule_bars" else "monolithic MUMPS"
+        lines += [
+            "",
+            f"## {problem}",
+            "",
+            "| DOFs | method | iterations | time [s] | "
+            f"to {TARGET:g} [s] | ratio | final error | peak MB | note |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for dofs in sorted({r["dofs"] for r in mine}):
+            base = next(r for r in mine if r["dofs"] == dofs and r["method"] == baseline)
+            for r in (r for r in mine if r["dofs"] == dofs):
+                t = r["seconds_to_target"]
+                ratio = (
+                    "—"
+                    if t is None or base["seconds_to_target"] is None
+                    else f"{t / base['seconds_to_target']:.2f}"
+                )
+                lines.append(
+                    f"| {dofs} | {r['method']} | {r['iterations']} | {r['seconds']:.3g} | "
+                    f"{'—' if t is None else f'{t:.3g}'} | {ratio} | {r['final_error']:.1e} | "
+                    f"{r['peak_memory_mb']:.0f} | {r['note']} |"
+                )
+        lines += [
+            "",
+            f"Scaling of the time to {TARGET:g} with DOFs (exponent of a power-law "
+            "fit over the sizes where it was reached, 3 or more):",
+            "",
+            "| method | exponent | sizes |",
+            "|---|---|---|",
+        ]
+        for method in methods:
+            points = [
+                (r["dofs"], r["seconds_to_target"])
+                for r in mine
+                if r["method"] == method and r["seconds_to_target"]
+            ]
+            exponents[problem, method] = exponent(points)
+            value = exponents[problem, method]
+            lines.append(
+                f"| {method} | {'—' if value is None else f'{value:.2f}'} | {len(points)} |"
+            )
+        largest = max(r["dofs"] for r in mine)
+        figure, axes = plt.subplots(figsize=(8, 5))
+        for method in methods:
+            points = [
+                (p["seconds"], p["error"])
+                for p in iterates
+                if p["problem"] == problem and p["dofs"] == largest and p["method"] == method
+            ]
+            if points:
+                t, e = np.array(points).T
+                axes.loglog(t, np.maximum(e, 1e-17), ".-", label=method)
+        axes.axhline(TARGET, color="grey", linewidth=0.8)
+        axes.set_xlabel("wall time [s]")
+        axes.set_ylabel("relative nodal error")
+        axes.set_title(f"{problem}, {largest} DOFs, {comm.size} rank(s)")
+        axes.legend(fontsize=7, ncol=2)
+        figure.tight_layout()
+        figure.savefig(args.out / f"error_vs_time_{problem}.png", dpi=110)
+        plt.close(figure)
+    figure, axes = plt.subplots(1, len(problems), figsize=(5 * len(problems), 4), squeeze=False)
+    for ax, problem in zip(axes[0], problems, strict=True):
+        for method in dict.fromkeys(r["method"] for r in rows if r["problem"] == problem):
+            points = sorted(
+                (r["dofs"], r["seconds_to_target"])
+                for r in rows
+                if r["problem"] == problem and r["method"] == method and r["seconds_to_target"]
+            )
+            if points:
+                ax.loglog(*np.array(points).T, "o-", label=method, markersize=3)
+        ax.set_xlabel("DOFs")
+        ax.set_ylabel(f"time to {TARGET:g} [s]")
+        ax.set_title(problem)
+        ax.legend(fontsize=6)
+    figure.tight_layout()
+    figure.savefig(args.out / "time_vs_dofs.png", dpi=110)
+    (args.out / "results.md").write_text("\n".join(lines) + "\n")
+    report = {
+        "ranks": comm.size,
+        "target": TARGET,
+        "rows": rows,
+        "exponents": [
+            {"problem": p, "method": m, "exponent": v} for (p, m), v in exponents.items()
+        ],
+        "seconds": time.perf_counter() - started,
+    }
+    (args.out / "report.json").write_text(json.dumps(report, indent=1))
+say(f"wrote {args.out}/results.md in {time.perf_counter() - started:.0f} s")
