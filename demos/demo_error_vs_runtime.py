@@ -27,7 +27,7 @@
 # its own rank (`placement="groups"`); monolithic and partitioned solves spread every body
 # over both ranks.
 #
-# Run `python demos/demo_error_vs_runtime.py` (about 40 minutes on one core; `--small` for
+# Run `python demos/demo_error_vs_runtime.py` (about an hour on one core; `--small` for
 # the tests). Output in `out_error_vs_runtime/`: `iterations.csv` (every iterate),
 # `summary.csv`, `results.md` (time to 1e-8 as a ratio to MUMPS, scaling exponents),
 # `error_vs_time_<problem>.png`, `time_vs_dofs.png` and `report.json`.
