@@ -22,17 +22,16 @@ import numpy as np
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
-from subdomain_contact.cases import GEO, bars_scene, stack, stack_scene, two_plates_scene
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.multiphysics import (
-    Contact,
-    CoupledProblem,
-    Displacement,
-    Material,
-    Penalty,
-    Potential,
+from subdomain_contact.analytic import BlocksBetweenWalls, TwoPlates
+from subdomain_contact.cases import (
+    bars_scene,
+    joule_bars,
+    stack,
+    stack_scene,
+    steel_blocks_between_walls,
+    two_plates_scene,
 )
+from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.newton import solve_newton
 from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
 from subdomain_contact.verification import relative_nodal_error
@@ -95,12 +94,7 @@ def plates(
     ``floor``: receives the monolithic solve's own error, the round-off floor of the
     discrete system (thin elements raise it).
     """
-    scene = sc.load_scene(
-        GEO / "two_plates.geo",
-        bodies=["plate_A", "plate_B"],
-        interfaces=["contact"],
-        parameters={"layers": n, "rows": n, "length": length, "height": height},
-    )
+    scene = two_plates_scene(n, n, length=length, height=height)
     source = 3.0 / length**2  # keeps the source's share of the field at any length
     problem = sc.ThermalProblem(
         scene,
@@ -221,25 +215,10 @@ case(
 
 def joule(voltage: float):
     """Constant-law Joule bars (T, φ) by the subdomain Newton vs the closed form."""
-    scene = bars_scene(n, 2)
-    problem = CoupledProblem(
-        scene,
-        {
-            "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
-            "plate_B": Material(conductivity=50.0, electrical_conductivity=3e4),
-        },
-        {"contact": Contact(conductance=2e3, electrical_conductance=5e4)},
-        [
-            sc.Temperature("left", 300.0),
-            sc.Temperature("right", 320.0),
-            Potential("left", voltage),
-            Potential("right", 0.0),
-        ],
-    )
+    problem, exact = joule_bars(bars_scene(n, 2), voltage=voltage)
     system = CoupledSystem(problem)
     system.reset({"temperature": 300.0})
     result = solve_newton(system, rtol=1e-12)
-    exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, voltage, 300.0, 320.0)
     truth = {
         "temperature": (exact.thermal.temperature_a, exact.thermal.temperature_b),
         "potential": (exact.potential_a, exact.potential_b),
@@ -264,28 +243,12 @@ case("potential of 1e4 V: 1.2e8 A/m², T up to 1e10 K", 1e-9, lambda: joule(1e4)
 
 def threshold(extra: float):
     """Steel blocks between walls, heated so that they just close a gap of 0.1 mm."""
-    scene = bars_scene(n, 2)
     gap, alpha, nu = 1e-4, 1.2e-5, 0.3
-    steel = Material(
-        conductivity=45.0, young=200e9, poisson=nu, expansion=alpha, reference_temperature=300.0
-    )
     heating = gap / (2 * 0.5 * (1 + nu) * alpha) + extra  # closure = gap (+ extra K)
-    problem = CoupledProblem(
-        scene,
-        {"plate_A": steel, "plate_B": steel},
-        {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
-        [
-            sc.Temperature("left", 300 + heating),
-            sc.Temperature("right", 300 + heating),
-            Displacement("left", 0, 0.0),
-            Displacement("right", 0, 0.0),
-            Displacement("bottom", 1, 0.0),
-        ],
-    )
+    problem, exact = steel_blocks_between_walls(bars_scene(n, 2), 300 + heating, gap=gap)
     system = CoupledSystem(problem)
     system.reset({"temperature": 300.0})
     result = solve_newton(system, rtol=1e-12)
-    exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (nu,) * 2, (alpha,) * 2, gap, 1e13)
     pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
     full = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (nu,) * 2, (alpha,) * 2, 0.0, 1e13)
     scale = full.pressure(heating)  # the pressure the same heating makes without a gap

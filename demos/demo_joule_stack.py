@@ -40,19 +40,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from subdomain_contact.analytic import JouleBars
-from subdomain_contact.cases import GEO, squeezed_joule_bars
+from subdomain_contact.cases import GEO, joule_bars, squeezed_joule_bars
 from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.geometry import load_scene
-from subdomain_contact.multiphysics import (
-    Contact,
-    CoupledProblem,
-    Material,
-    Potential,
-)
 from subdomain_contact.newton import solve_newton
 from subdomain_contact.output import write_fields
-from subdomain_contact.thermal import Temperature
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a few seconds, for the tests")
@@ -82,21 +74,7 @@ height, voltage = 0.1, 0.5
 # g = 5e4 S/m²; T = 300 K at x = 0 and 320 K at x = 1 m. The exact potential is piecewise
 # linear and the exact temperature piecewise quadratic, both reproduced by P1 at the nodes.
 
-exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, voltage, 300.0, 320.0)
-constant = CoupledProblem(
-    scene,
-    {
-        "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
-        "plate_B": Material(conductivity=50.0, electrical_conductivity=3e4),
-    },
-    {"contact": Contact(conductance=2e3, electrical_conductance=5e4)},
-    [
-        Temperature("left", 300.0),
-        Temperature("right", 320.0),
-        Potential("left", voltage),
-        Potential("right", 0.0),
-    ],
-)
+constant, exact = joule_bars(scene, voltage=voltage)
 system = CoupledSystem(constant)
 system.reset({"temperature": 300.0})
 newton = solve_newton(system, rtol=1e-12)

@@ -11,7 +11,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from subdomain_contact import laws
-from subdomain_contact.analytic import TwoPlates
+from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
 from subdomain_contact.geometry import Scene, load_scene
 from subdomain_contact.multiphysics import (
     Contact,
@@ -19,6 +19,7 @@ from subdomain_contact.multiphysics import (
     Displacement,
     ExponentialClosure,
     Material,
+    Penalty,
     Potential,
 )
 from subdomain_contact.thermal import (
@@ -35,9 +36,11 @@ __all__ = [
     "bars_scene",
     "blocks3d_scene",
     "heated_blocks",
+    "joule_bars",
     "squeezed_joule_bars",
     "stack",
     "stack_scene",
+    "steel_blocks_between_walls",
     "two_plates",
     "two_plates_scene",
 ]
@@ -67,15 +70,26 @@ def two_plates_scene(
     rows: int = 4,
     *,
     quads: bool = True,
+    length: float = 1.0,
+    height: float = 1.0,
     comm: MPI.Comm = MPI.COMM_WORLD,
     placement: str = "shared",
 ) -> Scene:
-    """``geo/two_plates.geo`` with ``layers`` element layers per plate and ``rows`` along y."""
+    """``geo/two_plates.geo``: ``layers`` element layers per plate, ``rows`` along y.
+
+    Each plate is ``length`` [m] along x (across the contact) and ``height`` [m] along y.
+    """
     return load_scene(
         GEO / "two_plates.geo",
         bodies=["plate_A", "plate_B"],
         interfaces=["contact"],
-        parameters={"layers": layers, "rows": rows, "quads": int(quads)},
+        parameters={
+            "layers": layers,
+            "rows": rows,
+            "quads": int(quads),
+            "length": length,
+            "height": height,
+        },
         comm=comm,
         placement=placement,
     )
@@ -182,13 +196,61 @@ def stack(scene: Scene, *, h: float, cooled: bool = True) -> ThermalProblem:
 
 def bars_scene(layers: int = 4, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """``geo/two_plates.geo`` as two bars of 0.5 m × 0.1 m (``layers`` × ``rows`` quads each)."""
-    return load_scene(
-        GEO / "two_plates.geo",
-        bodies=["plate_A", "plate_B"],
-        interfaces=["contact"],
-        parameters={"layers": layers, "rows": rows, "length": 0.5, "height": 0.1},
-        comm=comm,
+    return two_plates_scene(layers, rows, length=0.5, height=0.1, comm=comm)
+
+
+def joule_bars(
+    scene: Scene, *, voltage: float = 0.5, h: float = 2e3, g: float = 5e4
+) -> tuple[CoupledProblem, JouleBars]:
+    """Constant laws, heat and current through the bars of :func:`bars_scene`, and the closed form.
+
+    Bar A: k = 10 W/(m K), σ = 1e4 S/m; bar B: k = 50, σ = 3e4; contact conductances ``h``
+    [W/(m² K)] and ``g`` [S/m²]; T = 300 K at x = 0 and 320 K at x = 1 m; ``voltage`` [V]
+    across.
+    """
+    problem = CoupledProblem(
+        scene,
+        {
+            "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
+            "plate_B": Material(conductivity=50.0, electrical_conductivity=3e4),
+        },
+        {"contact": Contact(conductance=h, electrical_conductance=g)},
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 320.0),
+            Potential("left", voltage),
+            Potential("right", 0.0),
+        ],
     )
+    return problem, JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, h, g, voltage, 300.0, 320.0)
+
+
+def steel_blocks_between_walls(
+    scene: Scene, temperature: float, *, gap: float = 1e-4
+) -> tuple[CoupledProblem, BlocksBetweenWalls]:
+    """The bars of :func:`bars_scene` as steel blocks between fixed walls, heated uniformly.
+
+    Both walls at ``temperature`` [K] (reference 300 K), u_x = 0 at the walls, rollers at the
+    bottom, an initial ``gap`` [m] closed by a penalty of 1e13 Pa/m. Returns the problem and
+    its closed form (plane strain).
+    """
+    steel = Material(
+        conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
+    )
+    problem = CoupledProblem(
+        scene,
+        {"plate_A": steel, "plate_B": steel},
+        {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
+        [
+            Temperature("left", temperature),
+            Temperature("right", temperature),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, 0.0),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )
+    exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, gap, 1e13)
+    return problem, exact
 
 
 def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> CoupledProblem:

@@ -8,7 +8,13 @@ from mpi4py import MPI
 
 from subdomain_contact import laws
 from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
-from subdomain_contact.cases import GEO, bars_scene, squeezed_joule_bars
+from subdomain_contact.cases import (
+    GEO,
+    bars_scene,
+    joule_bars,
+    squeezed_joule_bars,
+    steel_blocks_between_walls,
+)
 from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.geometry import load_scene
 from subdomain_contact.multiphysics import (
@@ -73,20 +79,7 @@ def test_thermal_only_scene_builds_no_potential_or_displacement(bars, comm):
 
 
 def joule_problem(scene, *, voltage=0.5, h=2e3, g=5e4):
-    return CoupledProblem(
-        scene,
-        {
-            "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
-            "plate_B": Material(conductivity=50.0, electrical_conductivity=3e4),
-        },
-        {"contact": Contact(conductance=h, electrical_conductance=g)},
-        [
-            Temperature("left", 300.0),
-            Temperature("right", 320.0),
-            Potential("left", voltage),
-            Potential("right", 0.0),
-        ],
-    )
+    return joule_bars(scene, voltage=voltage, h=h, g=g)[0]
 
 
 def test_joule_bars_match_the_closed_form(bars, comm):
@@ -108,21 +101,7 @@ def test_joule_bars_match_the_closed_form(bars, comm):
 
 
 def expansion_problem(scene, temperature, *, gap=1e-4):
-    steel = Material(
-        conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
-    )
-    return CoupledProblem(
-        scene,
-        {"plate_A": steel, "plate_B": steel},
-        {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
-        [
-            Temperature("left", temperature),
-            Temperature("right", temperature),
-            Displacement("left", 0, 0.0),
-            Displacement("right", 0, 0.0),
-            Displacement("bottom", 1, 0.0),
-        ],
-    )
+    return steel_blocks_between_walls(scene, temperature, gap=gap)[0]
 
 
 @pytest.mark.parametrize("temperature", [350.0, 250.0])
