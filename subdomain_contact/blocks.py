@@ -24,12 +24,14 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.interfaces import MasterLayer, slave_map
+from subdomain_contact.schur import CondensedFactor
 from subdomain_contact.solvers import DIRECT, Reaper, destroy, make_ksp
 from subdomain_contact.thermal import BodyForms
 
 __all__ = ["BodyBlocks"]
 
 MasterValues = Mapping[str, npt.NDArray[np.float64]]
+Matrix = npt.NDArray[np.float64]
 
 
 class BodyBlocks:
@@ -43,6 +45,11 @@ class BodyBlocks:
         half_links: Interface name -> h̄ = 2h [W/(m^2 K)].
         factorise: Factorise the body matrix now (not needed when the blocks only feed the
             monolithic solve).
+        condense: For a body held by one rank, factorise the solid alone with its slave DOFs
+            left as a dense Schur block (:class:`CondensedFactor`), which gives the condensed
+            stiffness K̂ of every interface at the cost of that one factorisation; the
+            half-links are then added to the dense block. Elsewhere K̂ costs one solve per
+            slave DOF.
     """
 
     def __init__(
@@ -54,6 +61,7 @@ class BodyBlocks:
         half_links: Mapping[str, float],
         *,
         factorise: bool = True,
+        condense: bool = False,
     ) -> None:
         self.name, self.forms, self.V = name, forms, forms.V
         self.comm: MPI.Comm = self.V.mesh.comm
@@ -61,9 +69,6 @@ class BodyBlocks:
         self.half_links = {k: float(half_links[k]) for k in layers}
         self.slaves = {k: slave_map(layer, self.V, facet_tags) for k, layer in layers.items()}
         self.a_body = dolfinx.fem.form(self._solid_plus_links(list(layers)))
-        self.A = _assemble(self.a_body, forms.bcs)
-        self.ksp = make_ksp(self.A, f"sc_body_{name}_", DIRECT, setup=factorise)
-        self._ticket = Reaper.register(self.ksp)
         self.K_free = _assemble(dolfinx.fem.form(forms.solid), [])
         load = dolfinx.fem.form(forms.load)
         self.F_free = dolfinx.fem.petsc.assemble_vector(load)
@@ -99,9 +104,21 @@ class BodyBlocks:
         }
         self.T = dolfinx.fem.Function(self.V, name="temperature [K]")
         self._rhs, self._tmp, self._slave, self._reaction, self._gap = (
-            self.A.createVecLeft() for _ in range(5)
+            self.K_free.createVecLeft() for _ in range(5)
         )
-        self._links = {k: self.A.createVecLeft() for k in layers}
+        self._links = {k: self.K_free.createVecLeft() for k in layers}
+        self.factor: CondensedFactor | None = None
+        self.ksp: PETSc.KSP | None = None
+        self._A: PETSc.Mat | None = None
+        prefix = f"sc_body_{name}_"
+        if factorise and condense and self.comm.size == 1 and layers:
+            self.kept = np.unique(np.concatenate([m.local_dofs for m in self.slaves.values()]))
+            K = _assemble(dolfinx.fem.form(forms.solid), forms.bcs)
+            self.factor = CondensedFactor(K, self.kept, self._half_links_on_kept(), prefix)
+            K.destroy()
+        else:
+            self.ksp = make_ksp(self.A, prefix, DIRECT, setup=factorise)
+            self._ticket = Reaper.register(self.ksp)
 
     def __del__(self) -> None:
         """Destroy the PETSc objects now; the factorisation is left to :class:`Reaper`.
@@ -109,14 +126,22 @@ class BodyBlocks:
         Left to the garbage collector, parallel PETSc objects wait on a garbage list and hold
         MPI communicators: a long sweep then runs out of communicators.
         """
-        if "_links" not in self.__dict__:  # __init__ failed: petsc4py's own garbage handles it
+        if "_A" not in self.__dict__:  # __init__ failed: petsc4py's own garbage handles it
             return
-        Reaper.release(self._ticket)
+        if self.ksp is not None:
+            Reaper.release(self._ticket)
         destroy(
-            self.A, self.K_free, self.F_free, self.b0, *self.M_rows.values(),
+            self._A, self.K_free, self.F_free, self.b0, *self.M_rows.values(),
             *self.M_free.values(), self._rhs, self._tmp, self._slave, self._reaction,
             self._gap, *self._links.values(),
         )  # fmt: skip
+
+    @property
+    def A(self) -> PETSc.Mat:
+        """``K^S + Σ_k h̄_k M_k`` with the temperature conditions (assembled at first use)."""
+        if self._A is None:
+            self._A = _assemble(self.a_body, self.forms.bcs)
+        return self._A
 
     def _solid_plus_links(self, interfaces: list[str]) -> ufl.Form:
         """The solid's form plus the half-links of ``interfaces``."""
@@ -165,11 +190,13 @@ class BodyBlocks:
             nodal = self._on_slaves(k, load)
             nodal.array[self.slaves[k].local_dofs[self._fixed_slaves[k]]] = 0.0
             b.axpy(1.0, nodal)
-        self.ksp.solve(b, self.T.x.petsc_vec)
-        if self.ksp.getConvergedReason() < 0:
-            raise RuntimeError(
-                f"body '{self.name}': linear solve failed (reason {self.ksp.getConvergedReason()})"
-            )
+        if self.factor is not None:
+            self.factor.solve(b, self.T.x.petsc_vec)
+        else:
+            self.ksp.solve(b, self.T.x.petsc_vec)
+            if self.ksp.getConvergedReason() < 0:
+                reason = self.ksp.getConvergedReason()
+                raise RuntimeError(f"body '{self.name}': linear solve failed (reason {reason})")
         self.T.x.scatter_forward()
         return self.T
 
@@ -242,13 +269,37 @@ class BodyBlocks:
         destroy(slaves, block)
         return result
 
+    def condensed_stiffness(self, k: str) -> npt.NDArray[np.float64]:
+        """``K̂_ee = K_ee − K_ei K_ii⁻¹ K_ie`` [W/K] of interface k, dense, in master order.
+
+        The solid condensed on the slaves of k, contact term of k excluded, other interfaces'
+        half-links included (METHOD.md §3). From the Schur block of the factorisation where
+        there is one, else by one solve per slave DOF (:meth:`condensed`).
+        """
+        if self.factor is None:
+            K_ee, coupling = self.condensed(k)
+            return self.clamp_fixed(k, K_ee - coupling)
+        block = self.factor.sigma.copy()
+        for j, (at, H) in self._kept_links.items():
+            if j != k:
+                block[np.ix_(at, at)] += H
+        at = self._kept_links[k][0]
+        other = np.setdiff1d(np.arange(len(self.kept)), at)
+        K_hat = block[np.ix_(at, at)]
+        if other.size:
+            K_hat = K_hat - block[np.ix_(at, other)] @ np.linalg.solve(
+                block[np.ix_(other, other)], block[np.ix_(other, at)]
+            )
+        return self.clamp_fixed(k, self._to_master_order(K_hat, k))
+
     def condensed(
         self, k: str, interior: npt.NDArray[np.int32] | None = None
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """The solid's slave blocks on interface k: ``K_ee`` and ``K_ei K_ii⁻¹ K_ie`` [W/K].
 
         Contact term of k excluded, other interfaces' half-links included (METHOD.md §3), so
-        ``K̂_ee = K_ee − K_ei K_ii⁻¹ K_ie``. Both are dense, in master order.
+        ``K̂_ee = K_ee − K_ei K_ii⁻¹ K_ie``. Both are dense, in master order; one solve per
+        slave DOF. Fixed slaves keep their unit rows (see :meth:`clamp_fixed`).
 
         Args:
             k: Interface.
@@ -275,18 +326,46 @@ class BodyBlocks:
         coupling = self._to_master_order(self.comm.allreduce(local, op=MPI.SUM), k)
         K_ee_dense = self._gather_dense(K_ee, k)
         destroy(B, e, i, K_ee, K_ie_sparse, K_ii, K_ie, ksp, X)
-        # A slave fixed by a temperature condition is infinitely stiff, not the unit row the
-        # condition leaves in the matrix.
+        return K_ee_dense, coupling
+
+    def clamp_fixed(self, k: str, stiffness: Matrix) -> Matrix:
+        """``stiffness`` (master order) with the fixed slaves of k made infinitely stiff.
+
+        A slave fixed by a temperature condition is infinitely stiff, not the unit row the
+        condition leaves in the matrix: its row and column are zeroed and its diagonal set
+        to 1e8 times the largest one.
+        """
         fixed = np.concatenate(
             self.comm.allgather(self.slaves[k].master_index[self._fixed_slaves[k]])
         )
         if fixed.size:
-            stiff = 1e8 * float(np.abs(np.diag(K_ee_dense)).max())
-            for matrix in (K_ee_dense, coupling):
-                matrix[fixed, :] = 0.0
-                matrix[:, fixed] = 0.0
-            K_ee_dense[fixed, fixed] = stiff
-        return K_ee_dense, coupling
+            stiff = 1e8 * float(np.abs(np.diag(stiffness)).max())
+            stiffness = stiffness.copy()
+            stiffness[fixed, :] = 0.0
+            stiffness[:, fixed] = 0.0
+            stiffness[fixed, fixed] = stiff
+        return stiffness
+
+    def _half_links_on_kept(self) -> Matrix:
+        """``Σ_k h̄_k M_k`` on the kept (slave) DOFs; rows and columns of fixed DOFs zero.
+
+        Also keeps each interface's positions in ``kept`` and its block (``_kept_links``).
+        """
+        fixed = np.isin(self.kept, self._fixed_dofs())
+        H = np.zeros((len(self.kept),) * 2)
+        self._kept_links: dict[str, tuple[npt.NDArray[np.intp], Matrix]] = {}
+        for k, hbar in self.half_links.items():
+            at = np.searchsorted(self.kept, self.slaves[k].local_dofs)
+            slaves = self._slave_is(k)
+            block = self.M_free[k].createSubMatrix(slaves, slaves)
+            dense = block.convert("dense", out=PETSc.Mat())
+            link = hbar * dense.getDenseArray(readonly=True)
+            link[fixed[at], :] = 0.0
+            link[:, fixed[at]] = 0.0
+            destroy(slaves, block, dense)
+            self._kept_links[k] = (at, link)
+            H[np.ix_(at, at)] += link
+        return H
 
     def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
         start = self.V.dofmap.index_map.local_range[0]

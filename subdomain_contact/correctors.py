@@ -39,6 +39,9 @@ class Corrector(Protocol):
     """
 
     name: str
+    #: Whether ``part`` needs every body's condensed stiffness K̂ (bodies then factorise
+    #: with their slave DOFs left as a Schur block, which gives K̂ at no extra cost).
+    condense: bool
 
     def part(self, interface: str, body: BodyBlocks) -> Matrix:
         """The body's share: its K_C^α, or its S^α [W/K]."""
@@ -63,6 +66,7 @@ class _Paper:
 
     beta: float = 0.5
     name: str = "paper"
+    condense: bool = False
 
     def combine(
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
@@ -91,10 +95,10 @@ class Method2(_Paper):
     """Paper method 2: K_C = K̂_ee, full condensation; for large h. Contracts by K̂/(h̄ + K̂)."""
 
     name: str = "method2"
+    condense: bool = True
 
     def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
-        K_ee, coupling = body.condensed(interface)
-        return K_ee - coupling
+        return body.condensed_stiffness(interface)
 
 
 def paper_factor(refinement: int, layers: int = 1) -> float:
@@ -120,7 +124,7 @@ class PartialCondensation(_Paper):
         slaves = body.slaves[interface].local_dofs
         strip = dofs_within_layers(body.V, slaves, self.layers)
         K_ee, coupling = body.condensed(interface, np.setdiff1d(strip, slaves).astype(np.int32))
-        return K_ee - self.factor * coupling
+        return body.clamp_fixed(interface, K_ee - self.factor * coupling)
 
 
 def series_stiffness(half_link_mass: Matrix, condensed: Matrix) -> Matrix:
@@ -137,10 +141,11 @@ class Series:
     """Exact corrector of METHOD.md §4: G = (S^A + S^B)⁻¹; one correction for any h."""
 
     name: str = "series"
+    condense: bool = True
 
     def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
-        K_ee, coupling = body.condensed(interface)
-        return series_stiffness(body.half_links[interface] * body.mass(interface), K_ee - coupling)
+        half_link_mass = body.half_links[interface] * body.mass(interface)
+        return series_stiffness(half_link_mass, body.condensed_stiffness(interface))
 
     def combine(  # noqa: D102
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]

@@ -172,7 +172,9 @@ class CoupledBody:
         """``Σ_k B_k P_k m_k`` on owned DOFs, over the interfaces of ``masters`` it touches."""
         out = np.zeros(self.size)
         s, y = self.vectors[2], self.vectors[3]
-        for k in masters.keys() & self.B.keys():
+        # in the order of ``masters`` on every rank: a set's order follows the string hashes,
+        # which differ between processes, and the products are collective
+        for k in (k for k in masters if k in self.B):
             s.array[:] = 0.0
             self.slaves[k].scatter(masters[k], s.array)
             self.B[k].mult(s, y)

@@ -64,11 +64,12 @@ class SubdomainConvergenceError(RuntimeError):
 
 
 def body_blocks(
-    problem: ThermalProblem, *, factorise: bool = True
+    problem: ThermalProblem, *, factorise: bool = True, condense: bool = False
 ) -> tuple[dict[str, MasterLayer], dict[str, BodyBlocks]]:
     """Every interface's master layer, and the blocks of the bodies this rank's group holds.
 
-    ``factorise=False`` when the blocks only feed :func:`solve_monolithic`.
+    ``factorise=False`` when the blocks only feed :func:`solve_monolithic`; ``condense``:
+    see :class:`BodyBlocks`.
     """
     scene = problem.scene
     layers = {k: master_layer(i) for k, i in scene.interfaces.items()}
@@ -79,7 +80,9 @@ def body_blocks(
         mine = {i.name: layers[i.name] for i in scene.interfaces_of(name)}
         halves = {k: problem.half_link(k) for k in mine}
         forms = body_forms(problem, body)
-        blocks[name] = BodyBlocks(name, forms, body.facet_tags, mine, halves, factorise=factorise)
+        blocks[name] = BodyBlocks(
+            name, forms, body.facet_tags, mine, halves, factorise=factorise, condense=condense
+        )
     return layers, blocks
 
 
@@ -103,7 +106,8 @@ class ThermalSubdomains:
         self.problem = problem
         self.corrector = corrector or Series()
         scene = problem.scene
-        self.layers, self.blocks = body_blocks(problem)  # the bodies this rank's group solves
+        # the bodies this rank's group solves
+        self.layers, self.blocks = body_blocks(problem, condense=self.corrector.condense)
         insulating = {k for k, c in problem.contacts.items() if c.conductance == 0}
         parts = self._everywhere(
             {
