@@ -30,7 +30,8 @@
 # Run `python demos/demo_error_vs_runtime.py` (about an hour on one core; `--small` for
 # the tests). Output in `out_error_vs_runtime/`: `iterations.csv` (every iterate),
 # `summary.csv`, `results.md` (time to 1e-8 as a ratio to MUMPS, scaling exponents),
-# `error_vs_time_<problem>.png`, `time_vs_dofs.png` and `report.json`.
+# `error_vs_time_<problem>.png`, `time_vs_dofs.png` and `report.json`. `--from-csv DIR`
+# rewrites the table and the plots from the CSV of an earlier run, without running anything.
 
 import argparse
 import csv
@@ -63,6 +64,7 @@ from subdomain_contact.cases import (
 from subdomain_contact.coupled import CoupledSystem
 from subdomain_contact.newton import solve_newton
 from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
+from subdomain_contact.solvers import Reaper
 from subdomain_contact.verification import NodalReference, relative_nodal_error
 
 parser = argparse.ArgumentParser(description=__doc__)
@@ -72,6 +74,9 @@ parser.add_argument(
     "--problems", nargs="+", default=["two_plates", "stack", "joule_bars", "blocks3d"]
 )
 parser.add_argument("--max-dofs", type=float, default=1.1e6, help="skip larger meshes")
+parser.add_argument(
+    "--from-csv", type=Path, help="no runs: rewrite the table and plots from this folder's CSV"
+)
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 started = time.perf_counter()
@@ -117,10 +122,13 @@ class Trace:
 def reset_peak_memory() -> float:
     """Reset this process's VmHWM to its current resident set; return that set [MB].
 
-    Memory that earlier methods freed is first handed back to the system (``malloc_trim``),
-    so that a method's growth is not hidden by heap the allocator kept.
+    The factorisations earlier methods left to :class:`Reaper` are destroyed first, and the
+    memory they freed is handed back to the system (``malloc_trim``), so that a method's
+    growth is neither hidden by heap the allocator kept nor offset by its predecessor's
+    factorisations freed during it.
     """
     gc.collect()
+    Reaper.collect(comm)
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):
@@ -341,28 +349,30 @@ sizes = {
     "blocks3d": [0.1] if args.small else [0.05, 0.025, 0.0125],
 }
 plates_dofs = {n: 2 * (n + 1) ** 2 + (n + 1) for n in sizes["two_plates"]}
-for problem in args.problems:
-    for size in sizes[problem]:
-        if problem == "two_plates":
-            if plates_dofs[size] > args.max_dofs:
-                continue
-            thermal_methods(
-                problem,
-                lambda where, n=size: two_plates_scene(n, n, placement=where),
-                cooled_plates,
-            )
-        elif problem == "stack":
-            thermal_methods(
-                problem,
-                lambda where, n=size: stack_scene(8, n, n, placement=where),
-                lambda scene: stack(scene, h=1e2),
-            )
-        elif problem == "blocks3d":
-            thermal_methods(
-                problem, lambda where, s=size: blocks3d_scene(s, placement=where), heated_blocks
-            )
-        else:
-            newton_methods(size)
+if args.from_csv is None:
+    for problem in args.problems:
+        for size in sizes[problem]:
+            if problem == "two_plates":
+                if plates_dofs[size] > args.max_dofs:
+                    continue
+                thermal_methods(
+                    problem,
+                    lambda where, n=size: two_plates_scene(n, n, placement=where),
+                    cooled_plates,
+                )
+            elif problem == "stack":
+                thermal_methods(
+                    problem,
+                    lambda where, n=size: stack_scene(8, n, n, placement=where),
+                    lambda scene: stack(scene, h=1e2),
+                )
+            elif problem == "blocks3d":
+                thermal_methods(
+                    problem, lambda where, s=size: blocks3d_scene(s, placement=where), heated_blocks
+                )
+            else:
+                newton_methods(size)
+
 
 # ## Output: CSV, plots, the markdown table and the scaling exponents
 
@@ -375,6 +385,35 @@ def exponent(points: list[tuple[int, float]]) -> float | None:
     return float(np.polyfit(np.log(dofs), np.log(seconds), 1)[0])
 
 
+def read_csv(path: Path) -> list[dict]:
+    """The rows of a CSV this demo wrote, numbers as numbers (an empty cell: None)."""
+
+    def value(text: str):
+        for kind in (int, float):
+            try:
+                return kind(text)
+            except ValueError:
+                pass
+        return text or None
+
+    with open(path, newline="") as stream:
+        return [{k: value(v) for k, v in row.items()} for row in csv.DictReader(stream)]
+
+
+def style(index: int, method: str) -> dict:
+    """A colour per method; the line and marker tell the family (monolithic, subdomain, DN, RR)."""
+    family = next((f for f in ("monolithic", "DN", "RR") if f in method), "subdomain")
+    line, marker = {"monolithic": ("-", "o"), "subdomain": ("--", "s"), "DN": (":", "^")}.get(
+        family, ("-.", "v")
+    )
+    return {"color": plt.cm.tab20(index % 20), "linestyle": line, "marker": marker}
+
+
+if args.from_csv is not None:
+    rows, iterates = (read_csv(args.from_csv / f) for f in ("summary.csv", "iterations.csv"))
+    for r in rows:
+        r["note"] = r["note"] or ""
+ranks = rows[0]["ranks"] if rows else comm.size
 if comm.rank == 0:
     args.out.mkdir(parents=True, exist_ok=True)
     for path, table in (("summary.csv", rows), ("iterations.csv", iterates)):
@@ -385,7 +424,7 @@ if comm.rank == 0:
     problems = list(dict.fromkeys(r["problem"] for r in rows))
     exponents = {}
     lines = [
-        f"# Error against run time ({comm.size} rank{'s' if comm.size > 1 else ''})",
+        f"# Error against run time ({ranks} rank{'s' if ranks > 1 else ''})",
         "",
         f"Time to a relative error of {TARGET:g} (from assembly, errors not counted), as a",
         "ratio to the monolithic MUMPS solve of the same size in the same run; '—': never",
@@ -438,7 +477,7 @@ if comm.rank == 0:
             )
         largest = max(r["dofs"] for r in mine)
         figure, axes = plt.subplots(figsize=(8, 5))
-        for method in methods:
+        for index, method in enumerate(methods):
             points = [
                 (p["seconds"], p["error"])
                 for p in iterates
@@ -446,25 +485,27 @@ if comm.rank == 0:
             ]
             if points:
                 t, e = np.array(points).T
-                axes.loglog(t, np.maximum(e, 1e-17), ".-", label=method)
+                look = style(index, method)
+                axes.loglog(t, np.maximum(e, 1e-17), label=method, markersize=3, **look)
         axes.axhline(TARGET, color="grey", linewidth=0.8)
         axes.set_xlabel("wall time [s]")
         axes.set_ylabel("relative nodal error")
-        axes.set_title(f"{problem}, {largest} DOFs, {comm.size} rank(s)")
+        axes.set_title(f"{problem}, {largest} DOFs, {ranks} rank(s)")
         axes.legend(fontsize=7, ncol=2)
         figure.tight_layout()
         figure.savefig(args.out / f"error_vs_time_{problem}.png", dpi=110)
         plt.close(figure)
     figure, axes = plt.subplots(1, len(problems), figsize=(5 * len(problems), 4), squeeze=False)
     for ax, problem in zip(axes[0], problems, strict=True):
-        for method in dict.fromkeys(r["method"] for r in rows if r["problem"] == problem):
+        methods = dict.fromkeys(r["method"] for r in rows if r["problem"] == problem)
+        for index, method in enumerate(methods):
             points = sorted(
                 (r["dofs"], r["seconds_to_target"])
                 for r in rows
                 if r["problem"] == problem and r["method"] == method and r["seconds_to_target"]
             )
             if points:
-                ax.loglog(*np.array(points).T, "o-", label=method, markersize=3)
+                ax.loglog(*np.array(points).T, label=method, markersize=3, **style(index, method))
         ax.set_xlabel("DOFs")
         ax.set_ylabel(f"time to {TARGET:g} [s]")
         ax.set_title(problem)
@@ -473,7 +514,7 @@ if comm.rank == 0:
     figure.savefig(args.out / "time_vs_dofs.png", dpi=110)
     (args.out / "results.md").write_text("\n".join(lines) + "\n")
     report = {
-        "ranks": comm.size,
+        "ranks": ranks,
         "target": TARGET,
         "rows": rows,
         "exponents": [

@@ -134,6 +134,12 @@ def test_demo_error_vs_runtime(shared_tmp, monkeypatch, comm):
     for name in ("summary.csv", "iterations.csv", "results.md", "time_vs_dofs.png"):
         assert (out / name).stat().st_size > 100, name
     assert (out / "error_vs_time_two_plates.png").stat().st_size > 10_000
+    # the table and plots rewritten from the CSV alone are the same table
+    again = shared_tmp / "out_error_vs_runtime_again"
+    monkeypatch.setattr(sys, "argv", ["demo", "--from-csv", str(out), "--out", str(again)])
+    runpy.run_path(str(demo("demo_error_vs_runtime")), run_name="__main__")
+    comm.barrier()
+    assert (again / "results.md").read_text() == (out / "results.md").read_text()
 
 
 def test_demo_extreme_cases(shared_tmp, monkeypatch, comm):
