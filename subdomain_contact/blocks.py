@@ -113,8 +113,13 @@ class BodyBlocks:
         prefix = f"sc_body_{name}_"
         if factorise and condense and self.comm.size == 1 and layers:
             self.kept = np.unique(np.concatenate([m.local_dofs for m in self.slaves.values()]))
-            K = _assemble(dolfinx.fem.form(forms.solid), forms.bcs)
-            self.factor = CondensedFactor(K, self.kept, self._half_links_on_kept(), prefix)
+            self._kept_links = self._links_on_kept()
+            H = np.zeros((len(self.kept),) * 2)
+            for at, link in self._kept_links.values():
+                H[np.ix_(at, at)] += link
+            K = self.K_free.copy()  # the solid with its temperature conditions, as assembled
+            K.zeroRowsColumns(self._fixed_dofs().astype(PETSc.IntType), diag=1.0)
+            self.factor = CondensedFactor(K, self.kept, H, prefix)
             K.destroy()
         else:
             self.ksp = make_ksp(self.A, prefix, DIRECT, setup=factorise)
@@ -346,14 +351,13 @@ class BodyBlocks:
             stiffness[fixed, fixed] = stiff
         return stiffness
 
-    def _half_links_on_kept(self) -> Matrix:
-        """``Σ_k h̄_k M_k`` on the kept (slave) DOFs; rows and columns of fixed DOFs zero.
+    def _links_on_kept(self) -> dict[str, tuple[npt.NDArray[np.intp], Matrix]]:
+        """Interface -> positions of its slaves in ``kept``, and its ``h̄_k M_k`` there.
 
-        Also keeps each interface's positions in ``kept`` and its block (``_kept_links``).
+        Rows and columns of fixed DOFs are zero, as in the assembled body matrix.
         """
         fixed = np.isin(self.kept, self._fixed_dofs())
-        H = np.zeros((len(self.kept),) * 2)
-        self._kept_links: dict[str, tuple[npt.NDArray[np.intp], Matrix]] = {}
+        result = {}
         for k, hbar in self.half_links.items():
             at = np.searchsorted(self.kept, self.slaves[k].local_dofs)
             slaves = self._slave_is(k)
@@ -363,9 +367,8 @@ class BodyBlocks:
             link[fixed[at], :] = 0.0
             link[:, fixed[at]] = 0.0
             destroy(slaves, block, dense)
-            self._kept_links[k] = (at, link)
-            H[np.ix_(at, at)] += link
-        return H
+            result[k] = (at, link)
+        return result
 
     def _is(self, local: npt.NDArray[np.int32]) -> PETSc.IS:
         start = self.V.dofmap.index_map.local_range[0]
