@@ -360,13 +360,10 @@ class BodyBlocks:
         result = {}
         for k, hbar in self.half_links.items():
             at = np.searchsorted(self.kept, self.slaves[k].local_dofs)
-            slaves = self._slave_is(k)
-            block = self.M_free[k].createSubMatrix(slaves, slaves)
-            dense = block.convert("dense", out=PETSc.Mat())
-            link = hbar * dense.getDenseArray(readonly=True)
+            order = self.slaves[k].master_index  # slave i is master order[i]
+            link = hbar * self.mass(k)[np.ix_(order, order)]
             link[fixed[at], :] = 0.0
             link[:, fixed[at]] = 0.0
-            destroy(slaves, block, dense)
             result[k] = (at, link)
         return result
 

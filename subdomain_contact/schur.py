@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -85,15 +84,15 @@ class CondensedFactor:
             raise RuntimeError(f"{prefix}: factorisation failed ({self.pc.getFailedReason()})")
         if added.shape != (self.size, self.size) or not np.all(np.isfinite(added)):
             raise ValueError(f"{prefix}: H must be a finite square matrix on the kept rows")
-        self.sigma = self._replace_schur(lambda sigma: sigma + added)
+        self.sigma = self._add_to_schur(added)
         _call("MatFactorFactorizeSchurComplement", ctypes.c_void_p(self.F.handle))
 
     def __del__(self) -> None:
         if "_ticket" in self.__dict__:
             Reaper.release(self._ticket)
 
-    def _replace_schur(self, new: Callable[[Matrix], Matrix]) -> Matrix:
-        """Overwrite the unfactored Schur block Σ with ``new(Σ)``; return a copy of Σ."""
+    def _add_to_schur(self, added: Matrix) -> Matrix:
+        """Add ``added`` to the unfactored Schur block Σ in place; return a copy of Σ."""
         S, status = ctypes.c_void_p(), ctypes.c_int()
         F = ctypes.c_void_p(self.F.handle)
         _call("MatFactorGetSchurComplement", F, ctypes.byref(S), ctypes.byref(status))
@@ -106,7 +105,7 @@ class CondensedFactor:
         # column-major storage: row j of ``columns`` is column j of the block
         columns = np.ctypeslib.as_array(values, shape=(self.size, int(lead[0])))[:, : self.size]
         sigma = columns.T.copy()
-        columns[...] = new(sigma).T
+        columns += added.T
         _call("MatDenseRestoreArray", S, ctypes.byref(values))
         _call("MatFactorRestoreSchurComplement", F, ctypes.byref(S), ctypes.c_int(_UNFACTORED))
         return sigma
