@@ -127,24 +127,15 @@ for linear in ("monolithic", "subdomain"):
         "residuals": [s.residual for s in result.history],
         "fields": [s.fields for s in result.history],
         "inner_rounds": [s.inner_rounds for s in result.history],
+        "relative_residuals": result.relative_residuals().tolist(),
+        # Newton's order over its last three iterates above round-off (the converged state
+        # leaves a relative residual of about 1e-13 here): 2 when quadratic
+        "order": result.order(floor=1e-10),
         "seconds": result.seconds,
     }
     say(f"(b) {linear}: {result.iterations} Newton iterations, {result.seconds:.2f} s")
     say(result.table())
 difference = system.difference(states["subdomain"], states["monolithic"])
-# Convergence order per field, step by step: log(r_{k+1}/r_k) / log(r_k/r_{k-1}) → 2 when
-# Newton converges quadratically (the residual squares at each step).
-history = runs["subdomain"]["fields"]
-orders = {
-    field: [
-        float(
-            np.log(history[i + 1][field] / history[i][field])
-            / np.log(history[i][field] / history[i - 1][field])
-        )
-        for i in range(1, len(history) - 1)
-    ]
-    for field in coupled.fields
-}
 area = height  # per metre of depth
 pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / area
 current = system.bodies["plate_A"].contact_integral("contact", "current density")
@@ -153,14 +144,12 @@ T_max = comm.allreduce(
     op=MPI.MAX,
 )
 say(f"(b) subdomain vs monolithic, max relative difference per field: {difference}")
-for field, values in orders.items():
-    say(f"(b) {field}: convergence orders {np.round(values, 2).tolist()}")
+say(f"(b) convergence order: {', '.join(f'{k} {r["order"]:.2f}' for k, r in runs.items())}")
 say(f"(b) mean contact pressure {pressure:.4g} Pa, current {current:.5g} A/m, T max {T_max:.5g} K")
 write_fields(args.out, system)
 part_b = {
     "runs": runs,
     "difference": difference,
-    "orders": orders,
     "mean_pressure": pressure,
     "current": current,
     "max_temperature": T_max,
@@ -170,9 +159,10 @@ part_b = {
 if comm.rank == 0:
     fig, ax = plt.subplots(figsize=(6, 4))
     for linear, run in runs.items():
-        ax.semilogy(run["residuals"], "o-" if linear == "subdomain" else "x--", label=linear)
+        style = "o-" if linear == "subdomain" else "x--"
+        ax.semilogy(run["relative_residuals"], style, label=linear)
     ax.set_xlabel("Newton iteration")
-    ax.set_ylabel("residual 2-norm (W, A, N mixed)")
+    ax.set_ylabel("max over fields of residual / its scale")
     ax.set_title("(b) coupled bars: Newton outside")
     ax.legend()
     fig.tight_layout()

@@ -80,6 +80,8 @@ for refinement in refinements:
                     "corrector": corrector.name,
                     "dofs": sum(solver.num_dofs.values()),
                     "iterations": sum(result.krylov_iterations),
+                    "krylov_iterations": result.krylov_iterations,
+                    "master_dofs": sum(layer.size for layer in solver.layers.values()),
                     "rounds": result.rounds,
                     "relative_residual": result.history[-1],
                     "error_vs_monolithic": error_against(solver, result.temperatures, reference),

@@ -333,16 +333,41 @@ class NewtonStep:
 
 @dataclass
 class NewtonResult:
-    """Outcome of a Newton solve: the history, the reason and the wall time [s]."""
+    """Outcome of a Newton solve: the history, the reason and the wall time [s].
+
+    ``scale`` holds each field's residual scale [W, A, N] that the convergence test used.
+    """
 
     history: list[NewtonStep] = field(default_factory=list)
     reason: str = ""
     seconds: float = 0.0
+    scale: dict[str, float] = field(default_factory=dict)
 
     @property
     def iterations(self) -> int:
         """Newton iterations taken."""
         return self.history[-1].iteration if self.history else 0
+
+    def relative_residuals(self) -> npt.NDArray[np.float64]:
+        """Newton's own measure per iterate: ``max_f ‖F_f‖ / scale_f`` (fields never mix)."""
+        fields = [f for f, value in self.scale.items() if value > 0]
+        return np.array([max(s.fields[f] / self.scale[f] for f in fields) for s in self.history])
+
+    def order(self, floor: float = 1e-10) -> float:
+        """Convergence order from the last three iterates whose relative residual is > floor.
+
+        For ``ρ_{k+1} = C ρ_k²`` this is ``2 + ln(C_k/C_{k−1}) / ln(ρ_k/ρ_{k−1})``; a linear
+        rate gives about 1. Below ``floor`` the residual is round-off, not Newton: choose it
+        above the relative residual the converged state itself leaves.
+
+        Raises:
+            ValueError: Fewer than three iterates above ``floor``.
+        """
+        rho = self.relative_residuals()
+        above = rho[rho > floor][-3:]
+        if len(above) < 3:
+            raise ValueError(f"order: fewer than three relative residuals above {floor:g}: {rho}")
+        return float(np.log(above[2] / above[1]) / np.log(above[1] / above[0]))
 
     def table(self) -> str:
         """The history as text lines, one per iterate."""
@@ -521,7 +546,7 @@ def solve_newton(
         reason = None
         cause = callbacks.failure or error
     system.set_state(x)
-    result.seconds = time.perf_counter() - start
+    result.seconds, result.scale = time.perf_counter() - start, dict(callbacks.scale)
     destroy(snes, J, x, f)
     if reason is None or reason < 0:
         result.reason = _REASONS.get(reason, "error in a callback")

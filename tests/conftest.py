@@ -41,3 +41,13 @@ def pytest_sessionfinish(session, exitstatus):
     gc.collect()
     Reaper.collect(MPI.COMM_WORLD)
     gc.collect()
+
+
+def pytest_assertion_pass(item, lineno, orig, expl):
+    """With SC_ASSERTIONS=<file>: record every passing assertion with its values."""
+    import os
+
+    path = os.environ.get("SC_ASSERTIONS")
+    if path:
+        with open(f"{path}.{MPI.COMM_WORLD.rank}", "a") as out:
+            out.write(f"@@ {item.nodeid}:{lineno}: {orig}\n{expl}\n")

@@ -43,7 +43,9 @@ def test_interface_drawn_twice_is_accepted_when_conforming(comm):
     )
     result = sc.ThermalSubdomains(problem).solve()
     exact = sc.TwoPlates(1.0, 1.0, 1.0, 3.0, 2.0, 1.0, 0.0)
-    assert np.allclose(result.masters["contact"], exact.temperature_a(1.0) - exact.flux / 4.0)
+    # nodally exact; round-off only (the plates' direct solves: ≤ 5e-14 in test_thermal_contact)
+    master = exact.temperature_a(1.0) - exact.flux / 4.0  # q = h̄ (T_A − T_m), h̄ = 4
+    assert np.allclose(result.masters["contact"], master, rtol=0.0, atol=1e-10)
 
 
 @pytest.mark.parametrize(
@@ -125,8 +127,9 @@ def test_temperature_condition_touching_a_contact(plates):
     reference = sc.solve_monolithic(solver.blocks)
     spaces = {n: b.V for n, b in solver.blocks.items()}
     values = {n: T.x.array for n, T in result.temperatures.items()}
+    # solved to rtol 1e-12 (the fixed slaves' link form): measured 7e-16, 1e-11 leaves 1e4
     assert relative_nodal_error(spaces, values, reference.temperatures) <= 1e-11
-    assert np.allclose(result.masters["contact"], reference.masters["contact"], atol=1e-11)
+    assert np.allclose(result.masters["contact"], reference.masters["contact"], rtol=0, atol=1e-11)
 
 
 def test_diverging_iteration_stops_with_its_history(plates):
@@ -138,6 +141,7 @@ def test_diverging_iteration_stops_with_its_history(plates):
     ) as failure:
         solver.solve(rtol=1e-10, max_rounds=200)
     history = failure.value.result.history
+    # the divergence rule (1e6 times the first residual) stopped it, long before max_rounds
     assert history[-1] > 1e6 * history[0] and len(history) < 200
     assert (
         failure.value.result.temperatures["plate_A"].function_space.dofmap.index_map.size_global

@@ -24,11 +24,14 @@ def test_vtk_reads_back_with_units(plates, shared_tmp, comm):
         ]:
             grid = pyvista.get_reader(str(shared_tmp / f"{name}.pvd")).read().combine()
             values = grid.point_data["temperature [K]"]
-            assert np.allclose(values, expected(grid.points[:, 0]), atol=1e-10)
+            # nodally exact, round-off only (temperatures of order 1 K; as in
+            # test_thermal_contact, measured ≤ 5e-14): VTK's ASCII keeps 17 digits
+            assert np.allclose(values, expected(grid.points[:, 0]), rtol=0.0, atol=1e-10)
         master = pyvista.get_reader(str(shared_tmp / "master_contact.pvd")).read().combine()
-        assert master.n_points == 5 * comm.size or master.n_points >= 5
+        # the 5 master nodes, some written twice where the ranks' pieces meet
+        assert len(np.unique(master.points, axis=0)) == 5
         jump = case.exact.temperature_a(1.0) - case.exact.flux / (2 * 3.0)  # q = h̄ (T_A − T_m)
-        assert np.allclose(master.point_data["temperature [K]"], jump, atol=1e-10)
+        assert np.allclose(master.point_data["temperature [K]"], jump, rtol=0.0, atol=1e-10)
 
 
 def gathered(V, values):
@@ -49,6 +52,8 @@ def test_distributed_equals_serial(comm, corrector):
         result = solver.solve(rtol=1e-12)
         results[label] = (solver, result)
     (world, r_world), (serial, r_serial) = results["world"], results["self"]
+    # the same iteration with the bodies' sums in another order: round-off only (measured
+    # ≤ 3e-15 relative on 2 ranks), far from any stopping decision (rtol 1e-12)
     assert r_world.rounds == r_serial.rounds
     for name in ("plate_A", "plate_B"):
         x_w, u_w = gathered(world.blocks[name].V, r_world.temperatures[name].x.array)
