@@ -45,6 +45,7 @@ __all__ = [
     "ACCELERATIONS",
     "Monitor",
     "PartitionedResult",
+    "robin_robin_map",
     "solve_dirichlet_neumann",
     "solve_robin_robin",
 ]
@@ -69,6 +70,8 @@ class PartitionedResult:
         iterations: Coupling iterations (two body solves each).
         history: ``‖x̃ − x‖ / ‖x̃‖`` per iteration.
         temperatures: Body name -> the body's temperature Function [K] at the end.
+        data: The last coupling input ``x`` (the temperatures are its body solves).
+        output: Its output ``x̃``.
         seconds: Wall time [s].
     """
 
@@ -78,6 +81,8 @@ class PartitionedResult:
     balance: float = float("nan")
     history: list[float] = field(default_factory=list)
     temperatures: dict = field(default_factory=dict)
+    data: npt.NDArray[np.float64] | None = None
+    output: npt.NDArray[np.float64] | None = None
     seconds: float = 0.0
 
 
@@ -108,6 +113,23 @@ def solve_robin_robin(
     Raises:
         ValueError: Not two bodies and one interface, or an unknown acceleration.
     """
+    iterate, size, bodies = _robin_robin(problem, acceleration)
+    update = _Update(acceleration, relaxation)
+    return _couple(iterate, update, size, bodies, rtol, max_iterations, monitor, balance_tol)
+
+
+def robin_robin_map(problem: ThermalProblem) -> Callable[[np.ndarray], np.ndarray]:
+    """The Robin-Robin iteration ``x ↦ x̃`` itself (B's interface temperatures [K]).
+
+    It is affine, ``x̃ = M x + c``: probing it gives the iteration matrix M, whose
+    ``‖(I − M)⁻¹‖`` turns the coupling's stopping rule into a bound on its error.
+    """
+    iterate, _, _ = _robin_robin(problem, "constant")
+    return lambda x: iterate(x)[0]
+
+
+def _robin_robin(problem: ThermalProblem, acceleration: str):
+    """One Robin-Robin iteration ``x ↦ (x̃, heat balance)``, the data size and the bodies."""
     k, size, (first, second) = _bodies(problem, acceleration, "Robin-Robin", neumann=False)
 
     def iterate(x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
@@ -120,10 +142,7 @@ def solve_robin_robin(
         output = second.slaves[k].gather(T.x.array, size, second.comm)
         return output, float(np.linalg.norm(taken + given)) / scale
 
-    update = _Update(acceleration, relaxation)
-    return _couple(
-        iterate, update, size, (first, second), rtol, max_iterations, monitor, balance_tol
-    )
+    return iterate, size, (first, second)
 
 
 def solve_dirichlet_neumann(
@@ -206,7 +225,7 @@ def _couple(
         change = float(np.linalg.norm(output - x) / max(np.linalg.norm(output), 1e-300))
         result.balance = change if balance is None else balance
         result.history.append(change)
-        result.iterations = iteration
+        result.iterations, result.data, result.output = iteration, x, output
         if monitor is not None:
             monitor(iteration, temperatures)
         size_now = float(np.linalg.norm(output))
