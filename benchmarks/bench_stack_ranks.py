@@ -20,26 +20,26 @@ import json, sys, time
 import dolfinx_solver
 from mpi4py import MPI
 import subdomain_contact as sc
-from subdomain_contact.cases import stack, stack_scene
+from verification.cases import stack, stack_scene
 rows = []
 for refinement in {refinements}:
-    chain = stack_scene(8, 8 * refinement, 8 * refinement, comm=MPI.COMM_SELF)
-    scene = sc.load_scene(chain.source, bodies=list(chain.bodies),
-                          interfaces=list(chain.interfaces), placement="{placement}",
-                          parameters=dict(bodies=8, layers=8 * refinement, rows=8 * refinement))
+    scene = stack_scene(8, 8 * refinement, 8 * refinement, placement="{placement}")
     MPI.COMM_WORLD.barrier()
     tic = time.perf_counter()
-    solver = sc.ThermalSubdomains(stack(scene, h=1e4))
-    result = sc.solve_interface_krylov(solver)
-    seconds = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
-    mono = float("nan")
-    if scene.shared:
-        tic = time.perf_counter()
-        reference = sc.solve_monolithic(solver.blocks)
-        mono = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
-    dofs = sum(solver.num_dofs.values())
+    with sc.System(stack(scene, h=1e4)) as system:
+        result = sc.solve(system)
+        seconds = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
+        mono = float("nan")
+        if scene.shared:
+            system.reset()
+            tic = time.perf_counter()
+            monolithic = sc.Monolithic()
+            sc.solve(system, monolithic)
+            monolithic.destroy()
+            mono = MPI.COMM_WORLD.allreduce(time.perf_counter() - tic, op=MPI.MAX)
+        dofs = sum(system.num_dofs().values())
     rows.append(dict(refinement=refinement, dofs=dofs,
-                     iterations=sum(result.krylov_iterations), seconds=seconds,
+                     iterations=sum(result.inner[-1].krylov_iterations), seconds=seconds,
                      monolithic_seconds=mono))
 if MPI.COMM_WORLD.rank == 0:
     print("RESULT", json.dumps(rows))
@@ -50,7 +50,17 @@ def run(ranks: int, refinements: list[int], placement: str = "shared") -> list[d
     mpiexec = Path(sys.executable).parent / "mpiexec"
     code = WORKER.format(refinements=refinements, placement=placement)
     out = subprocess.run(
-        [str(mpiexec), "-n", str(ranks), sys.executable, "-c", code],
+        [
+            str(mpiexec),
+            "-n",
+            str(ranks),
+            "-env",
+            "OMP_NUM_THREADS",
+            "1",
+            sys.executable,
+            "-c",
+            code,
+        ],
         check=True,
         capture_output=True,
         text=True,

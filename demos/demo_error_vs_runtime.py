@@ -6,7 +6,7 @@
 # time and the error against the best available reference:
 #
 # * **monolithic MUMPS** (one direct solve of the merged system) and **monolithic CG + GAMG**;
-# * the **subdomain iteration** with each corrector (series, method 1, method 2, partial
+# * the **subdomain iteration** with each corrector (exact, method 1, method 2, partial
 #   condensation) and **interface CG** preconditioned by partial condensation;
 # * the **partitioned couplings** a preCICE user would pick: Dirichlet–Neumann and
 #   Robin–Robin, each with constant relaxation (ω = 0.5), Aitken and IQN-ILS;
@@ -49,9 +49,11 @@ from mpi4py import MPI
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from petsc4py import PETSc
 
 import subdomain_contact as sc
-from subdomain_contact.cases import (
+from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
+from verification.cases import (
     bars_scene,
     blocks3d_scene,
     heated_blocks,
@@ -61,11 +63,7 @@ from subdomain_contact.cases import (
     two_plates,
     two_plates_scene,
 )
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.newton import solve_newton
-from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
-from subdomain_contact.solvers import Reaper
-from subdomain_contact.verification import NodalReference, relative_nodal_error
+from verification.nodal import NodalReference, field_values, relative_nodal_error
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a minute, for the tests")
@@ -114,21 +112,21 @@ class Trace:
         self.paused += time.perf_counter() - stopped
 
     def record(self, iteration: int, state) -> None:
+        """Keep the error of ``state()`` (the time to compute the state is not counted)."""
         seconds = self.now()
         with self.pause():
-            self.points.append((iteration, seconds, self.error(state)))
+            self.points.append((iteration, seconds, self.error(state())))
 
 
 def reset_peak_memory() -> float:
     """Reset this process's VmHWM to its current resident set; return that set [MB].
 
-    The factorisations earlier methods left to :class:`Reaper` are destroyed first, and the
-    memory they freed is handed back to the system (``malloc_trim``), so that a method's
-    growth is neither hidden by heap the allocator kept nor offset by its predecessor's
-    factorisations freed during it.
+    What earlier methods left to petsc4py is destroyed first, and the memory it freed is
+    handed back to the system (``malloc_trim``), so that a method's growth is neither hidden
+    by heap the allocator kept nor offset by its predecessor's factorisations freed during it.
     """
     gc.collect()
-    Reaper.collect(comm)
+    PETSc.garbage_cleanup(comm)
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):
@@ -202,68 +200,80 @@ def run(problem: str, dofs: int, method: str, solve) -> None:
 # ## Thermal problems: every method
 
 
-def nodal_values(values: dict) -> dict:
-    """Body name -> nodal array, from Functions or arrays."""
-    return {n: v.x.array if hasattr(v, "x") else v for n, v in values.items()}
+class Iterates:
+    """Errors of the iterates of one linear solve of a system (its bodies' temperatures).
+
+    Newton's one step of a linear problem moves the cold state ``x0`` by ``−y``: an iterate
+    ``y`` of the inner solve is the state ``x0 − y``.
+    """
+
+    def __init__(self, system: sc.System, reference: NodalReference) -> None:
+        system.reset()
+        system.apply_conditions()
+        self.system, self.x0 = system, system.state()
+        self.spaces = field_values(system)[0]
+        self.reference = reference.at(self.spaces)
+
+    def error(self, y) -> float:
+        state = self.x0.array_r - y
+        values = {n: state[self.system.slices[n]] for n in self.system.bodies}
+        return relative_nodal_error(self.spaces, values, self.reference, comm)
 
 
 def thermal_methods(name: str, make_scene, make_problem) -> None:
     """Every method on one thermal problem (partitioned couplings only for two bodies)."""
     shared = make_problem(make_scene("shared"))
-    _, blocks = sc.body_blocks(shared, factorise=False)
-    exact = sc.solve_monolithic(blocks, refine=2)
-    reference = NodalReference({n: b.V for n, b in blocks.items()}, exact.temperatures)
-    dofs, bodies = exact.num_dofs, len(blocks)
-    del blocks
+    with sc.System(shared) as system:
+        sc.solve(system, sc.Monolithic(refine=2))
+        reference = NodalReference(*field_values(system))
+        dofs, bodies = sum(system.num_dofs().values()), len(system.bodies)
     say(f"{name}: {dofs} DOFs, {bodies} bodies, {comm.size} rank(s)")
 
-    def error_on(spaces):
-        ref = reference.at(spaces)
-        return lambda values: relative_nodal_error(spaces, nodal_values(values), ref, comm)
+    def linear(problem, solver, trace, *, direct: bool = False):
+        """The whole problem by one linear solver: one Newton step, its iterates traced.
+
+        ``direct``: a solve without iterates, its answer recorded as iteration 1.
+        """
+        with sc.System(problem) as system:
+            with trace.pause():
+                iterates = Iterates(system, reference)
+                trace.error = iterates.error
+            if not direct:
+                solver.monitor = lambda count, iterate: trace.record(count, iterate)
+            result = sc.solve(system, solver, rtol=1e-12)
+            if direct:
+                state = system.state()
+                final = iterates.x0.array_r - state.array_r
+                state.destroy()
+                trace.record(1, lambda: final)
+            return result.inner[-1]
 
     def monolithic(options):
         def solve(trace):
-            _, blocks = sc.body_blocks(shared, factorise=False)
-            with trace.pause():
-                trace.error = error_on({n: b.V for n, b in blocks.items()})
-            monitor = None if options is None else trace.record
-            result = sc.solve_monolithic(blocks, options, monitor=monitor)
-            if options is None:
-                trace.record(1, result.temperatures)
-            return "" if options is None else f"{result.iterations} CG iterations"
+            solver = sc.Monolithic(options)
+            inner = linear(shared, solver, trace, direct=options is sc.DIRECT)
+            solver.destroy()
+            return "" if options is sc.DIRECT else f"{inner.rounds} CG iterations"
 
         return solve
 
-    run(name, dofs, "monolithic MUMPS", monolithic(None))
+    run(name, dofs, "monolithic MUMPS", monolithic(sc.DIRECT))
     run(name, dofs, "monolithic CG+GAMG", monolithic(sc.CG_GAMG))
 
     problem = make_problem(make_scene(placement))
 
-    def subdomain(corrector, iterate):
+    def subdomain(corrector, krylov):
         def solve(trace):
-            solver = sc.ThermalSubdomains(problem, corrector)
-            with trace.pause():
-                trace.error = error_on({n: b.V for n, b in solver.blocks.items()})
-            return iterate(solver, trace)
+            solver = sc.Subdomains(corrector, krylov=krylov, max_rounds=100, dense_limit=0)
+            inner = linear(problem, solver, trace)
+            return f"{sum(inner.krylov_iterations)} CG iterations" if krylov else ""
 
         return solve
 
-    def fixed_point(solver, trace):
-        solver.solve(rtol=1e-12, max_rounds=100, monitor=lambda i, T: trace.record(i, T))
-
-    def interface_cg(solver, trace):
-        def monitor(iteration, masters):
-            with trace.pause():
-                solver.round(masters)  # the bodies at these masters, for the error only
-            trace.record(iteration, {n: b.T for n, b in solver.blocks.items()})
-
-        result = sc.solve_interface_krylov(solver, rtol=1e-12, dense_limit=0, monitor=monitor)
-        return f"{sum(result.krylov_iterations)} CG iterations"
-
     partial = sc.PartialCondensation(layers=4)
-    for corrector in [sc.Series(), sc.Method1(), sc.Method2(), partial]:
-        run(name, dofs, f"subdomain {corrector.name}", subdomain(corrector, fixed_point))
-    run(name, dofs, "interface CG (partial)", subdomain(partial, interface_cg))
+    for corrector in [sc.Exact(), sc.Method1(), sc.Method2(), partial]:
+        run(name, dofs, f"subdomain {corrector.name}", subdomain(corrector, False))
+    run(name, dofs, "interface CG (partial)", subdomain(partial, True))
     if bodies != 2:
         return  # the partitioned couplings take two bodies
 
@@ -272,10 +282,12 @@ def thermal_methods(name: str, make_scene, make_problem) -> None:
             def monitor(iteration, temperatures):
                 if trace.error is None:
                     with trace.pause():
-                        trace.error = error_on(
-                            {n: T.function_space for n, T in temperatures.items()}
+                        spaces = {n: T.function_space for n, T in temperatures.items()}
+                        at = reference.at(spaces)
+                        trace.error = lambda values: relative_nodal_error(
+                            spaces, {n: T.x.array for n, T in values.items()}, at, comm
                         )
-                trace.record(iteration, temperatures)
+                trace.record(iteration, lambda: temperatures)
 
             result = couple(
                 shared,
@@ -301,45 +313,55 @@ def thermal_methods(name: str, make_scene, make_problem) -> None:
 def newton_methods(cells: tuple[int, int]) -> None:
     """Monolithic and subdomain Newton on the squeezed Joule bars (every field)."""
     scene = bars_scene(*cells)
-    reference_system = CoupledSystem(squeezed_joule_bars(scene))
-    solve_newton(reference_system, linear="monolithic", rtol=1e-13, max_it=40)
-    reference = reference_system.state()
-    dofs = reference.getSize()
+    with sc.System(squeezed_joule_bars(scene)) as system:
+        system.reset({"temperature": 300.0})
+        sc.solve(system, sc.Monolithic(), rtol=1e-13, max_it=40)
+        reference = system.state()
+        dofs = reference.getSize()
     say(f"joule_bars: {dofs} DOFs (T, φ, u), {comm.size} rank(s)")
 
-    def newton(linear: str, **options):
+    def newton(make_linear):
         def solve(trace):
-            system = CoupledSystem(squeezed_joule_bars(scene))
-            trace.error = lambda _: max(system.difference(system.state(), reference).values())
-            result = solve_newton(
-                system,
-                linear=linear,
-                rtol=1e-12,
-                max_it=40,
-                monitor=lambda it: trace.record(it, None),
-                **options,
-            )
-            rounds = sum(step.inner_rounds for step in result.history)
-            return f"{rounds} inner {'rounds' if linear == 'subdomain' else 'solves/its'}"
+            with sc.System(squeezed_joule_bars(scene)) as system:
+                system.reset({"temperature": 300.0})
+                trace.error = lambda _: max(system.difference(system.state(), reference).values())
+                linear = make_linear()
+                result = sc.solve(
+                    system,
+                    linear,
+                    rtol=1e-12,
+                    max_it=40,
+                    monitor=lambda it: trace.record(it, lambda: None),
+                )
+                rounds = sum(step.inner_rounds for step in result.history)
+                if isinstance(linear, sc.Monolithic):
+                    linear.destroy()
+                    return f"{rounds} inner solves/its"
+                return f"{rounds} inner rounds"
 
         return solve
 
     gmres = {"ksp_type": "gmres", "pc_type": "gamg", "ksp_rtol": "1e-12", "ksp_max_it": "2000"}
     problem = "joule_bars"
-    run(problem, dofs, "Newton, monolithic MUMPS", newton("monolithic"))
-    run(problem, dofs, "Newton, monolithic GMRES+GAMG", newton("monolithic", linear_options=gmres))
-    run(problem, dofs, "Newton, subdomain exact", newton("subdomain"))
-    run(problem, dofs, "Newton, subdomain method1", newton("subdomain", corrector="method1"))
+    run(problem, dofs, "Newton, monolithic MUMPS", newton(sc.Monolithic))
+    run(problem, dofs, "Newton, monolithic GMRES+GAMG", newton(lambda: sc.Monolithic(gmres)))
+    run(problem, dofs, "Newton, subdomain exact", newton(sc.Subdomains))
+    run(
+        problem,
+        dofs,
+        "Newton, subdomain method1",
+        newton(lambda: sc.Subdomains(sc.Method1(), max_rounds=400)),
+    )
 
 
 # ## The runs
 
 
-def cooled_plates(scene: sc.Scene) -> sc.ThermalProblem:
+def cooled_plates(scene: sc.Scene) -> sc.Problem:
     """The two plates, k = 1 and 10 W/(m K), h = 1e3 W/(m² K), the top cooled."""
     base = two_plates(scene, h=1e3, k_b=10.0).problem
     cooling = sc.Convection("top", 5.0, 2.0)
-    return sc.ThermalProblem(scene, base.materials, base.contacts, [*base.conditions, cooling])
+    return sc.Problem(scene, base.materials, base.contacts, [*base.conditions, cooling])
 
 
 sizes = {

@@ -22,8 +22,9 @@ import numpy as np
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from subdomain_contact.analytic import BlocksBetweenWalls, TwoPlates
-from subdomain_contact.cases import (
+from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
+from verification.analytic import BlocksBetweenWalls, TwoPlates
+from verification.cases import (
     bars_scene,
     joule_bars,
     stack,
@@ -31,10 +32,7 @@ from subdomain_contact.cases import (
     steel_blocks_between_walls,
     two_plates_scene,
 )
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.newton import solve_newton
-from subdomain_contact.partitioned import solve_dirichlet_neumann, solve_robin_robin
-from subdomain_contact.verification import relative_nodal_error
+from verification.nodal import error_against, field_values, relative_nodal_error
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a few seconds, for the tests")
@@ -89,33 +87,36 @@ def plates(
     corrector=None,
     floor: list | None = None,
 ):
-    """The series subdomain solve of two plates (a source of 3 W/m³ in A) vs the closed form.
+    """The subdomain solve of two plates (a source of 3 W/m³ in A) vs the closed form.
 
     ``floor``: receives the monolithic solve's own error, the round-off floor of the
     discrete system (thin elements raise it).
     """
     scene = two_plates_scene(n, n, length=length, height=height)
     source = 3.0 / length**2  # keeps the source's share of the field at any length
-    problem = sc.ThermalProblem(
+    problem = sc.Problem(
         scene,
-        {"plate_A": sc.ThermalMaterial(k_a, source), "plate_B": sc.ThermalMaterial(k_b)},
-        {"contact": sc.ThermalContact(h)},
+        {
+            "plate_A": sc.Material(conductivity=k_a, heat_source=source),
+            "plate_B": sc.Material(conductivity=k_b),
+        },
+        {"contact": sc.Contact(conductance=h)},
         [sc.Temperature("left", t_left), sc.Temperature("right", t_right)],
     )
     exact = TwoPlates(length, length, k_a, k_b, h, t_left, t_right, source)
-    solver = sc.ThermalSubdomains(problem, corrector)
-    result = solver.solve(rtol=1e-12, max_rounds=100)
-    spaces = {name: b.V for name, b in solver.blocks.items()}
-    values = {name: T.x.array for name, T in result.temperatures.items()}
     truth = {
         "plate_A": lambda x: exact.temperature_a(x[:, 0]),
         "plate_B": lambda x: exact.temperature_b(x[:, 0]),
     }
-    if floor is not None:
-        floor.append(
-            relative_nodal_error(spaces, sc.solve_monolithic(solver.blocks).temperatures, truth)
-        )
-    return relative_nodal_error(spaces, values, truth), result.rounds
+    with sc.System(problem) as system:
+        linear = sc.Subdomains(corrector, krylov=False, max_rounds=100)
+        result = sc.solve(system, linear, rtol=1e-12)
+        error = error_against(system, truth)
+        if floor is not None:
+            system.reset()
+            sc.solve(system, sc.Monolithic())
+            floor.append(error_against(system, truth))
+    return error, result.rounds
 
 
 # The closed forms are nodally exact for P1, so an accurate row differs from them by
@@ -155,22 +156,21 @@ case("method 1 at h = 1e6 (cannot converge)", 1e-9, lambda: plates(1e6, correcto
 
 def floating_chain():
     """Three bodies, only the first held: interface CG (with its coarse space) vs monolithic."""
-    problem = stack(stack_scene(3, n, n), h=10.0)
-    solver = sc.ThermalSubdomains(problem)
-    result = sc.solve_interface_krylov(solver, rtol=1e-12)
-    reference = sc.solve_monolithic(solver.blocks)
-    spaces = {name: b.V for name, b in solver.blocks.items()}
-    values = {name: T.x.array for name, T in result.temperatures.items()}
-    error = relative_nodal_error(spaces, values, reference.temperatures)
-    return error, sum(result.krylov_iterations)
+    with sc.System(stack(stack_scene(3, n, n), h=10.0)) as system:
+        result = sc.solve(system, rtol=1e-12)  # floating bodies: interface CG by default
+        spaces, values = field_values(system)
+        system.reset()
+        sc.solve(system, sc.Monolithic())
+        error = relative_nodal_error(spaces, values, field_values(system)[1])
+    return error, sum(result.inner[-1].krylov_iterations)
 
 
 def nothing_holds_the_plates():
     scene = two_plates_scene(n, n)
-    sc.ThermalProblem(
+    sc.Problem(
         scene,
-        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
-        {"contact": sc.ThermalContact(1.0)},
+        {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)},
+        {"contact": sc.Contact(conductance=1.0)},
         [sc.HeatFlux("left", 1.0), sc.HeatFlux("right", -1.0)],
     )
     return math.inf, 0
@@ -183,16 +183,17 @@ case("floating scene: no temperature anywhere", 0.0, nothing_holds_the_plates)
 
 
 def partitioned(couple, h: float):
-    """The top-cooled plates, Aitken-accelerated coupling vs the series solve."""
+    """The top-cooled plates, Aitken-accelerated coupling vs the subdomain solve."""
     scene = two_plates_scene(n, n)
-    problem = sc.ThermalProblem(
+    problem = sc.Problem(
         scene,
-        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
-        {"contact": sc.ThermalContact(h)},
+        {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)},
+        {"contact": sc.Contact(conductance=h)},
         [sc.Temperature("left", 1.0), sc.Temperature("right", 0.0), sc.Convection("top", 5.0, 2.0)],
     )
-    series = sc.ThermalSubdomains(problem).solve(rtol=1e-12)
-    reference = {name: T.x.array.copy() for name, T in series.temperatures.items()}
+    with sc.System(problem) as system:
+        sc.solve(system, rtol=1e-12)
+        reference = field_values(system)[1]
     result = couple(problem, acceleration="aitken", max_iterations=100)
     if not result.converged:
         raise RuntimeError(
@@ -221,9 +222,9 @@ case(
 def joule(voltage: float):
     """Constant-law Joule bars (T, φ) by the subdomain Newton vs the closed form."""
     problem, exact = joule_bars(bars_scene(n, 2), voltage=voltage)
-    system = CoupledSystem(problem)
+    system = sc.System(problem)
     system.reset({"temperature": 300.0})
-    result = solve_newton(system, rtol=1e-12)
+    result = sc.solve(system, rtol=1e-12)
     truth = {
         "temperature": (exact.thermal.temperature_a, exact.thermal.temperature_b),
         "potential": (exact.potential_a, exact.potential_b),
@@ -237,6 +238,7 @@ def joule(voltage: float):
             error = max(error, float(np.abs(values - exact_values).max(initial=0.0)))
             scale = max(scale, float(np.abs(exact_values).max(initial=0.0)))
         worst = max(worst, comm.allreduce(error, op=MPI.MAX) / comm.allreduce(scale, op=MPI.MAX))
+    system.destroy()
     return worst, result.iterations
 
 
@@ -251,10 +253,10 @@ def threshold(extra: float):
     gap, alpha, nu = 1e-4, 1.2e-5, 0.3
     heating = gap / (2 * 0.5 * (1 + nu) * alpha) + extra  # closure = gap (+ extra K)
     problem, exact = steel_blocks_between_walls(bars_scene(n, 2), 300 + heating, gap=gap)
-    system = CoupledSystem(problem)
-    system.reset({"temperature": 300.0})
-    result = solve_newton(system, rtol=1e-12)
-    pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
+    with sc.System(problem) as system:
+        system.reset({"temperature": 300.0})
+        result = sc.solve(system, rtol=1e-12)
+        pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
     full = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (nu,) * 2, (alpha,) * 2, 0.0, 1e13)
     scale = full.pressure(heating)  # the pressure the same heating makes without a gap
     return abs(pressure - exact.pressure(heating)) / scale, result.iterations

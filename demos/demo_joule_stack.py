@@ -40,11 +40,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from subdomain_contact.cases import GEO, joule_bars, squeezed_joule_bars
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.geometry import load_scene
-from subdomain_contact.newton import solve_newton
-from subdomain_contact.output import write_fields
+import subdomain_contact as sc
+from verification.cases import GEO, joule_bars, squeezed_joule_bars
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a few seconds, for the tests")
@@ -60,7 +57,7 @@ def say(*text: object) -> None:
 
 
 layers, rows = (4, 2) if args.small else (64, 12)
-scene = load_scene(
+scene = sc.load_scene(
     GEO / "two_plates.geo",
     bodies=["plate_A", "plate_B"],
     interfaces=["contact"],
@@ -75,9 +72,9 @@ height, voltage = 0.1, 0.5
 # linear and the exact temperature piecewise quadratic, both reproduced by P1 at the nodes.
 
 constant, exact = joule_bars(scene, voltage=voltage)
-system = CoupledSystem(constant)
+system = sc.System(constant)
 system.reset({"temperature": 300.0})
-newton = solve_newton(system, rtol=1e-12)
+newton = sc.solve(system, rtol=1e-12)
 truth = {
     "plate_A": {"temperature": exact.thermal.temperature_a, "potential": exact.potential_a},
     "plate_B": {"temperature": exact.thermal.temperature_b, "potential": exact.potential_b},
@@ -104,8 +101,8 @@ part_a = {
     "inner_rounds": [s.inner_rounds for s in newton.history],
     "dofs": system.num_dofs(),
 }
-write_fields(args.out / "constant", system)
-del system
+sc.write_vtk(args.out / "constant", system)
+system.destroy()
 
 # ## (b) Pressure- and temperature-dependent laws, all fields coupled
 #
@@ -116,11 +113,11 @@ del system
 # Newton starts from 300 K and everything else zero.
 
 coupled = squeezed_joule_bars(scene)  # its laws, written out: subdomain_contact/cases.py
-system = CoupledSystem(coupled)
+system = sc.System(coupled)
 runs, states = {}, {}
-for linear in ("monolithic", "subdomain"):
+for linear, solver in [("monolithic", sc.Monolithic()), ("subdomain", sc.Subdomains())]:
     system.reset({"temperature": 300.0})
-    result = solve_newton(system, linear=linear, rtol=1e-12)
+    result = sc.solve(system, solver, rtol=1e-12)
     states[linear] = system.state()
     runs[linear] = {
         "iterations": result.iterations,
@@ -146,7 +143,7 @@ T_max = comm.allreduce(
 say(f"(b) subdomain vs monolithic, max relative difference per field: {difference}")
 say(f"(b) convergence order: {', '.join(f'{k} {r["order"]:.2f}' for k, r in runs.items())}")
 say(f"(b) mean contact pressure {pressure:.4g} Pa, current {current:.5g} A/m, T max {T_max:.5g} K")
-write_fields(args.out, system)
+sc.write_vtk(args.out, system)
 part_b = {
     "runs": runs,
     "difference": difference,

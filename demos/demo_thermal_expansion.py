@@ -36,14 +36,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from subdomain_contact.analytic import BlocksBetweenWalls
-from subdomain_contact.cases import GEO
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.geometry import load_scene
-from subdomain_contact.multiphysics import Contact, CoupledProblem, Displacement, Material, Penalty
-from subdomain_contact.newton import solve_newton
-from subdomain_contact.output import write_fields
-from subdomain_contact.thermal import Temperature
+import subdomain_contact as sc
+from subdomain_contact.physics import Contact, Displacement, Material, Penalty, Problem, Temperature
+from verification.analytic import BlocksBetweenWalls
+from verification.cases import GEO
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a few seconds, for the tests")
@@ -60,7 +56,7 @@ def say(*text: object) -> None:
 
 layers, rows = (4, 2) if args.small else (40, 16)
 length, height, contact_x = 0.5, 0.2, 0.5
-scene = load_scene(
+scene = sc.load_scene(
     GEO / "two_plates.geo",
     bodies=["plate_A", "plate_B"],
     interfaces=["contact"],
@@ -74,9 +70,9 @@ contact = Contact(conductance=1e4, normal=Penalty(k_n), gap=gap)
 exact = BlocksBetweenWalls((length, length), (E, E), (nu, nu), (alpha, alpha), gap, k_n)
 
 
-def problem_at(temperature: float) -> CoupledProblem:
+def problem_at(temperature: float) -> Problem:
     """Both walls at ``temperature``; u_x = 0 at the walls, rollers at the bottom."""
-    return CoupledProblem(
+    return Problem(
         scene,
         {"plate_A": steel, "plate_B": steel},
         {"contact": contact},
@@ -110,15 +106,15 @@ steps = []
 system = None
 for temperature in schedule:
     previous = None if system is None else system.state()
-    old_system = system
-    system = CoupledSystem(problem_at(temperature))
+    if system is not None:
+        system.destroy()
+    system = sc.System(problem_at(temperature))
     if previous is None:
         system.reset({"temperature": T_ref})
     else:
         system.set_state(previous)  # same layout: the same scene and fields
         previous.destroy()
-    del old_system
-    result = solve_newton(system, rtol=1e-12)
+    result = sc.solve(system, rtol=1e-12)
     pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / height
     closure = mean_at_contact(system.bodies["plate_A"]) - mean_at_contact(system.bodies["plate_B"])
     heating = temperature - T_ref
@@ -144,19 +140,20 @@ for temperature in schedule:
         f"{row['inner_rounds']}"
     )
     if temperature == max(schedule) and row is steps[schedule.index(temperature)]:
-        write_fields(args.out / "hot", system)
-write_fields(args.out / "cold", system)
+        sc.write_vtk(args.out / "hot", system)
+sc.write_vtk(args.out / "cold", system)
+system.destroy()
 
 # ## The same hot step by the monolithic Newton
 #
 # The subdomain Newton and the monolithic Newton solve the same discrete problem from the same
 # start; they must agree to solver precision.
 
-system = CoupledSystem(problem_at(max(schedule)))
+system = sc.System(problem_at(max(schedule)))
 states = {}
-for linear in ("subdomain", "monolithic"):
+for linear, solver in [("subdomain", sc.Subdomains()), ("monolithic", sc.Monolithic())]:
     system.reset({"temperature": T_ref})
-    solve_newton(system, linear=linear, rtol=1e-12)
+    sc.solve(system, solver, rtol=1e-12)
     states[linear] = system.state()
 difference = system.difference(states["subdomain"], states["monolithic"])
 say(f"hot step, subdomain vs monolithic Newton, max relative difference: {difference}")

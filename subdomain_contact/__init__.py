@@ -1,64 +1,78 @@
 """Multiphysics contact between solids by the subdomain method of Ramadane et al. (2005).
 
-The package reads as the method does: ``geometry`` (gmsh bodies and master meshes) →
-``thermal`` (UFL forms) → ``interfaces`` (master layers) → ``blocks`` (a body's slave/master
-blocks and solves) → ``correctors`` and ``subdomain`` (the fixed point), ``krylov`` (every
-interface at once) → ``monolithic`` (the reference) → ``output`` (VTK).
-Import ``dolfinx_solver`` before this package.
+The package reads as the method does: ``scene`` (gmsh bodies and master meshes) → ``laws``
+and ``physics`` (materials, contact laws, conditions, UFL residuals per body) → ``masters``
+(master layers, channels, slave maps) → ``body`` (a body's blocks, its factorisation with the
+contact DOFs left as a Schur block: ``schur``) → ``system`` (every body and master, the
+state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteration: fixed point
+or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) → ``io``.
+Import ``dolfinx_solver`` before this package (this module does it).
 """
 
 import dolfinx_solver  # noqa: F401  (must precede dolfinx and petsc4py)
 
-from subdomain_contact.analytic import TwoPlates
-from subdomain_contact.correctors import (
-    Method1,
-    Method2,
-    PartialCondensation,
-    Series,
-    paper_factor,
-)
-from subdomain_contact.geometry import Scene, load_scene
-from subdomain_contact.krylov import KrylovResult, solve_interface_krylov
-from subdomain_contact.monolithic import CG_GAMG, MonolithicResult, solve_monolithic
-from subdomain_contact.output import write_vtk
-from subdomain_contact.subdomain import (
-    SubdomainConvergenceError,
-    SubdomainResult,
-    ThermalSubdomains,
-    body_blocks,
-)
-from subdomain_contact.thermal import (
+from subdomain_contact import laws
+from subdomain_contact.correctors import Exact, Method1, Method2, PartialCondensation, paper_factor
+from subdomain_contact.io import write_vtk
+from subdomain_contact.laws import PowerLaw, Table
+from subdomain_contact.monolithic import CG_GAMG, Monolithic
+from subdomain_contact.newton import NewtonConvergenceError, NewtonStep, Result, solve
+from subdomain_contact.physics import (
+    Contact,
     Convection,
+    CurrentDensity,
+    Displacement,
+    ExponentialClosure,
     HeatFlux,
+    Material,
+    Penalty,
+    Potential,
+    Problem,
     Temperature,
-    ThermalContact,
-    ThermalMaterial,
-    ThermalProblem,
 )
+from subdomain_contact.scene import Scene, load_scene
+from subdomain_contact.solvers import DIRECT
+from subdomain_contact.subdomain import (
+    InterfaceResult,
+    SubdomainConvergenceError,
+    Subdomains,
+    Tolerance,
+)
+from subdomain_contact.system import System
 
 __all__ = [
     "CG_GAMG",
+    "DIRECT",
+    "Contact",
     "Convection",
+    "CurrentDensity",
+    "Displacement",
+    "Exact",
+    "ExponentialClosure",
     "HeatFlux",
-    "KrylovResult",
+    "InterfaceResult",
+    "Material",
     "Method1",
     "Method2",
-    "MonolithicResult",
+    "Monolithic",
+    "NewtonConvergenceError",
+    "NewtonStep",
     "PartialCondensation",
+    "Penalty",
+    "Potential",
+    "PowerLaw",
+    "Problem",
+    "Result",
     "Scene",
-    "Series",
     "SubdomainConvergenceError",
-    "SubdomainResult",
+    "Subdomains",
+    "System",
+    "Table",
     "Temperature",
-    "ThermalContact",
-    "ThermalMaterial",
-    "ThermalProblem",
-    "ThermalSubdomains",
-    "TwoPlates",
-    "body_blocks",
+    "Tolerance",
+    "laws",
     "load_scene",
     "paper_factor",
-    "solve_interface_krylov",
-    "solve_monolithic",
+    "solve",
     "write_vtk",
 ]

@@ -1,11 +1,15 @@
-"""Correctors of the master fixed point: ΔU_m = −G Σ_α r^α on each interface.
+"""Correctors of the master iteration: ``ΔU_m = −G_k R_k`` on each interface, any field set.
 
 The paper's correctors (eqs. 5–8) blend one correction per body with β:
-``ΔU_m = −[β K_C^A⁻¹ + (1 − β) K_C^B⁻¹] ½ Σ_α r^α``, with K_C the half-link ``h̄M``
-(method 1), the solid's condensed stiffness ``K̂_ee`` (method 2) or its partial condensation
-on a strip of element layers scaled by X (eqs. 9–10). The series corrector (METHOD.md §4)
-uses the exact slope of each body's response, ``S^α = h̄M (h̄M + K̂_ee)⁻¹ K̂_ee``, and
-converges in one correction on a single linear interface for any h.
+``G = ½ [β K_C^A⁻¹ + (1 − β) K_C^B⁻¹]``, with K_C the half-link's own master block (method 1,
+``h̄M`` for heat), the solid's condensed stiffness ``K̂`` on the interface (method 2), or its
+partial condensation on a strip of element layers scaled by X (eqs. 9–10). The exact corrector
+(METHOD.md §4) uses each body's whole interface response ``S^α`` (the series law
+``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` in the thermal case, the condensed Jacobian ``D − C A⁻¹ B`` for coupled
+fields), ``G = (S^A + S^B)⁻¹``: one correction for a linear interface at any h.
+
+Every part is a small dense matrix over the interface's master DOFs (all its channels),
+computed where the body lives; ``combine`` runs everywhere.
 """
 
 from __future__ import annotations
@@ -13,50 +17,43 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from subdomain_contact.blocks import BodyBlocks, dofs_within_layers
+from subdomain_contact.body import Body
 
 __all__ = [
     "Corrector",
+    "Exact",
     "Method1",
     "Method2",
     "PartialCondensation",
-    "Series",
     "paper_factor",
-    "series_stiffness",
 ]
 
 Matrix = npt.NDArray[np.float64]
 
 
 class Corrector(Protocol):
-    """Builds the dense operator G of one interface, one body at a time.
-
-    ``part`` runs where the body lives (collective on its communicator) and returns a small
-    dense matrix in master order; ``combine`` runs everywhere on the two parts.
-    """
+    """Builds the dense operator G of one interface from its two bodies' parts."""
 
     name: str
-    #: Whether ``part`` needs every body's condensed stiffness K̂ (bodies then factorise
-    #: with their slave DOFs left as a Schur block, which gives K̂ at no extra cost).
-    condense: bool
 
-    def part(self, interface: str, body: BodyBlocks) -> Matrix:
-        """The body's share: its K_C^α, or its S^α [W/K]."""
+    def part(self, interface: str, body: Body) -> Matrix:
+        """The body's share on the interface: its K_C^α, or its S^α (master order)."""
         ...
 
     def combine(
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
     ) -> Matrix:
-        """G such that ΔU_m = −G Σ_α r^α [K/W]."""
+        """G such that ΔU_m = −G R (master order)."""
         ...
 
 
 def _inverse(K: Matrix, what: str) -> Matrix:
     if not np.all(np.isfinite(K)) or np.linalg.cond(K) > 1e15:
-        raise ValueError(f"{what} is singular (a floating body?): use the series corrector")
+        raise ValueError(f"{what} is singular (a floating body?): use the exact corrector")
     return np.linalg.inv(K)
 
 
@@ -66,7 +63,6 @@ class _Paper:
 
     beta: float = 0.5
     name: str = "paper"
-    condense: bool = False
 
     def combine(
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
@@ -82,22 +78,21 @@ class _Paper:
 
 @dataclass(frozen=True, kw_only=True)
 class Method1(_Paper):
-    """Paper method 1: K_C = K_mm = h̄M; for small h. Contracts by h̄/(h̄ + K̂) in 1D."""
+    """Paper method 1: K_C = K_mm, the half-link's master block (h̄M); for small h."""
 
     name: str = "method1"
 
-    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
-        return body.half_links[interface] * body.mass(interface)
+    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
+        return body.link_stiffness(interface)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Method2(_Paper):
-    """Paper method 2: K_C = K̂_ee, full condensation; for large h. Contracts by K̂/(h̄ + K̂)."""
+    """Paper method 2: K_C = K̂, the solid condensed on the interface; for large h."""
 
     name: str = "method2"
-    condense: bool = True
 
-    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
+    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
         return body.condensed_stiffness(interface)
 
 
@@ -108,7 +103,7 @@ def paper_factor(refinement: int, layers: int = 1) -> float:
 
 @dataclass(frozen=True, kw_only=True)
 class PartialCondensation(_Paper):
-    """Paper §2: K̂_ee(X) = K_ee − X K_ei K_ii,strip⁻¹ K_ie on ``layers`` element layers.
+    """Paper §2: K̂(X) = K_ee − X K_ei K_ii,strip⁻¹ K_ie on ``layers`` element layers.
 
     DOFs beyond the strip are clamped. X corrects the interface mode that is uniform along
     the contact; it is exact for that mode in 1D when X = (1 − 1/m)(N + 1)/N (m elements).
@@ -118,36 +113,50 @@ class PartialCondensation(_Paper):
     factor: float = 1.0
     name: str = "partial"
 
-    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
+    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
         if self.layers < 1 or not np.isfinite(self.factor) or self.factor <= 0:
             raise ValueError(f"partial condensation: layers = {self.layers}, X = {self.factor}")
         slaves = body.slaves[interface].local_dofs
-        strip = dofs_within_layers(body.V, slaves, self.layers)
-        K_ee, coupling = body.condensed(interface, np.setdiff1d(strip, slaves).astype(np.int32))
+        strip = dofs_within_layers(body.forms.W, slaves, self.layers)
+        interior = np.setdiff1d(strip, slaves).astype(np.int32)
+        K_ee, coupling = body.condense(interface, interior)
         return body.clamp_fixed(interface, K_ee - self.factor * coupling)
 
 
-def series_stiffness(half_link_mass: Matrix, condensed: Matrix) -> Matrix:
-    """S = ((h̄M)⁻¹ + K̂⁻¹)⁻¹ [W/K], computed as h̄M (h̄M + K̂)⁻¹ K̂.
-
-    This form subtracts nothing (stable at any h̄) and allows a singular K̂ (floating body).
-    """
-    S = half_link_mass @ np.linalg.solve(half_link_mass + condensed, condensed)
-    return 0.5 * (S + S.T)
-
-
 @dataclass(frozen=True, kw_only=True)
-class Series:
+class Exact:
     """Exact corrector of METHOD.md §4: G = (S^A + S^B)⁻¹; one correction for any h."""
 
-    name: str = "series"
-    condense: bool = True
+    name: str = "exact"
 
-    def part(self, interface: str, body: BodyBlocks) -> Matrix:  # noqa: D102
-        half_link_mass = body.half_links[interface] * body.mass(interface)
-        return series_stiffness(half_link_mass, body.condensed_stiffness(interface))
+    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
+        S = body.interface_stiffness()
+        at = body.master_slices()[interface]
+        return S[at, at]
 
     def combine(  # noqa: D102
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
     ) -> Matrix:
         return _inverse(parts[0] + parts[1], f"S^A + S^B on '{interface}'")
+
+
+def dofs_within_layers(
+    W: dolfinx.fem.FunctionSpace, seeds: npt.NDArray[np.int32], layers: int
+) -> npt.NDArray[np.int32]:
+    """Owned DOFs of ``W`` within ``layers`` element layers of the DOFs ``seeds`` (included).
+
+    A layer is every cell that has a marked DOF; its DOFs are marked for the next layer.
+    Parallel-safe: marks cross process boundaries through the index map.
+    """
+    bs = W.dofmap.index_map_bs
+    marker = dolfinx.la.vector(W.dofmap.index_map, dtype=np.int32)
+    marker.array[np.asarray(seeds) // bs] = 1
+    marker.scatter_forward()
+    cells = W.dofmap.list
+    for _ in range(layers):
+        hit = cells[marker.array[cells].max(axis=1) > 0]
+        marker.array[hit.ravel()] = 1
+        marker.scatter_reverse(dolfinx.la.InsertMode.add)
+        marker.scatter_forward()
+    blocks = np.flatnonzero(marker.array[: W.dofmap.index_map.size_local])
+    return (bs * blocks[:, None] + np.arange(bs)).ravel().astype(np.int32)

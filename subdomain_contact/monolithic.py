@@ -1,66 +1,30 @@
-"""The monolithic reference: every body and master layer in one system, solved directly.
+"""The monolithic reference: the whole Jacobian, bodies and master layers merged, solved at once.
 
-Unknowns ``[U^α ..., U_m,k ...]``; blocks ``K^α`` (the body matrices of the subdomain solve),
-``−h̄_k M_k P_k`` between a body and a master layer, and ``Σ_α h̄_k P_kᵀ M_k P_k`` on each
+Unknowns ``[y^α ..., y_m,k ...]``; blocks ``A^α`` (each body's whole matrix), ``B^α_k P_k``
+between a body and a master layer, ``P_kᵀ C^α_k`` back, and ``Σ_α P_kᵀ D^α_k P_k`` on each
 master layer. It is the same discrete system as the subdomain iteration, with the master
-layers merged, so the two must agree to solver precision.
+layers merged, so Newton with either linear solver follows the same path. Masters of an
+insulating contact have no equation: they are held at 0.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from types import MappingProxyType
 
-import dolfinx
-import dolfinx.fem.petsc
 import numpy as np
 import numpy.typing as npt
+import scipy.sparse
 from petsc4py import PETSc
 
-from subdomain_contact.blocks import BodyBlocks
+from subdomain_contact.body import Body
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+from subdomain_contact.subdomain import InterfaceResult, Tolerance
+from subdomain_contact.system import System
 
-__all__ = ["CG_GAMG", "Monitor", "MonolithicResult", "solve_monolithic"]
+__all__ = ["CG_GAMG", "Monolithic"]
 
-
-@dataclass
-class MonolithicResult:
-    """Solution of the merged system.
-
-    Temperatures [K] per body, master values [K] per interface, the solve time [s], the
-    system's size and the iterations of the solve (1 for a direct solve).
-    """
-
-    temperatures: dict[str, npt.NDArray[np.float64]]
-    masters: dict[str, npt.NDArray[np.float64]]
-    seconds: float
-    num_dofs: int
-    iterations: int = 1
-
-
-def _prolongation(block: BodyBlocks, k: str) -> PETSc.Mat:
-    """``P_k``: body rows × master columns, 1 where a slave DOF sits on a master DOF."""
-    layer = block.layers[k]
-    rows = block.V.dofmap.index_map
-    cols = layer.V.dofmap.index_map
-    P = PETSc.Mat().createAIJ(
-        ((rows.size_local, rows.size_global), (cols.size_local, cols.size_global)),
-        nnz=(1, 1),
-        comm=block.comm,
-    )
-    slaves = block.slaves[k]
-    start = rows.local_range[0]
-    for dof, master in zip(slaves.local_dofs, slaves.master_index, strict=True):
-        P.setValue(start + int(dof), int(master), 1.0)
-    P.assemble()
-    return P
-
-
-#: Called after every iteration of an iterative solve with its number and body name ->
-#: the owned temperatures [K] of the iterate.
-Monitor = Callable[[int, dict[str, npt.NDArray[np.float64]]], None]
+Vector = npt.NDArray[np.float64]
 
 #: Conjugate gradients preconditioned by smoothed-aggregation algebraic multigrid (PETSc's
 #: GAMG), to a relative residual of 1e-12: the monolithic iterative solve.
@@ -69,119 +33,173 @@ CG_GAMG: Mapping[str, str] = MappingProxyType(
 )
 
 
-def solve_monolithic(
-    blocks: dict[str, BodyBlocks],
-    options: Mapping[str, str] | None = None,
-    *,
-    refine: int = 0,
-    monitor: Monitor | None = None,
-) -> MonolithicResult:
-    """Assemble the merged system from the bodies' blocks and solve it (MUMPS by default).
+class Monolithic:
+    """``J y = b`` by one solve of the merged matrix (MUMPS by default): the reference.
 
     Args:
-        blocks: Every body's blocks (:func:`body_blocks`; no factorisation needed).
-        options: PETSc options of the solve: :data:`DIRECT` (default) or :data:`CG_GAMG`.
-        refine: Steps of iterative refinement after the solve (``x += K⁻¹ (b − K x)``).
-        monitor: Called after every iteration of an iterative solve (its time is the
-            caller's to exclude).
+        options: PETSc options of the solve (an iterative one stops at its own ``ksp_rtol``).
+        prefix: Options prefix of the solve (``-<prefix>ksp_*``, ``-<prefix>pc_*``).
+        monitor: Called after every iteration of an iterative solve with its number and a
+            function returning the iterate (global-vector layout).
+        refine: Steps of iterative refinement after each solve (``y += K⁻¹ (b − K y)``): a
+            reference polished beyond the direct solve's round-off.
+
+    Call :meth:`destroy` (collectively) when done.
     """
-    start = time.perf_counter()
-    bodies = list(blocks)
-    neighbours = {
-        n for b in blocks.values() for layer in b.layers.values() for n in layer.interface.bodies
-    }
-    if not neighbours <= set(bodies):
-        raise ValueError(
-            "solve_monolithic: the bodies live on different rank groups; load the scene with "
-            "placement='shared' (or on one rank) for the monolithic reference"
-        )
-    interfaces = sorted({k for b in blocks.values() for k in b.layers})
-    n = len(bodies) + len(interfaces)
-    rows: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
-    made: list[PETSc.Object] = []  # destroyed at the end, collectively
-    lifted: dict[int, np.ndarray] = {}  # master right-hand sides from fixed slave DOFs
-    for a, name in enumerate(bodies):
-        rows[a][a] = blocks[name].A
-    for m, k in enumerate(interfaces, start=len(bodies)):
-        for a, name in enumerate(bodies):
-            block = blocks[name]
-            if k not in block.layers:
-                continue
-            P = _prolongation(block, k)
-            coupling = block.M_rows[k].matMult(P)
-            coupling.scale(-block.half_links[k])
-            rows[a][m], rows[m][a] = coupling, coupling.transpose(PETSc.Mat())
-            MP = block.M_free[k].matMult(P)
-            diagonal = P.transposeMatMult(MP)
-            # an insulating contact (h̄ = 0) leaves its masters free: they are set to 0
-            diagonal.scale(block.half_links[k] or 1.0)
-            made += [P, MP, coupling, rows[m][a], diagonal]
-            lifted[m] = lifted.get(m, 0.0) + block.half_links[k] * _fixed_slave_flux(block, k, P)
-            if rows[m][m] is None:
-                rows[m][m] = diagonal
-            else:
-                rows[m][m].axpy(1.0, diagonal, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    nest = PETSc.Mat().createNest(rows, comm=blocks[bodies[0]].comm)
-    K = nest.convert("aij", out=PETSc.Mat())
-    ksp = make_ksp(K, "sc_monolithic_", options or DIRECT)
-    b, x = K.createVecs()
-    sizes = [blocks[name].V.dofmap.index_map.size_local for name in bodies]
-    layer_sizes = []
-    for k in interfaces:
-        owner = next(blk for blk in blocks.values() if k in blk.layers)
-        layer_sizes.append(owner.layers[k].V.dofmap.index_map.size_local)
-    b.array[:] = np.concatenate(
-        [blocks[name].b0.array[:s] for name, s in zip(bodies, sizes, strict=True)]
-        + [
-            np.asarray(lifted.get(m, np.zeros(s)))
-            for m, s in enumerate(layer_sizes, start=len(bodies))
-        ]
+
+    def __init__(
+        self,
+        options: Mapping[str, str] = DIRECT,
+        *,
+        prefix: str = "sc_monolithic_",
+        monitor: Callable[[int, Callable[[], Vector]], None] | None = None,
+        refine: int = 0,
+    ) -> None:
+        self.options, self.prefix, self.monitor = options, prefix, monitor
+        self.refine = refine
+        self.K: PETSc.Mat | None = None
+        self.ksp: PETSc.KSP | None = None
+
+    def check(self, system: System) -> None:
+        """Refuse a system this solver cannot solve (bodies on different rank groups)."""
+        if not system.problem.scene.shared:
+            raise ValueError(
+                f"{system.problem.scene.source}: the monolithic solve needs every body on the "
+                "same ranks: load the scene with placement='shared' (or run on one rank)"
+            )
+
+    def setup(self, system: System) -> None:
+        """Merge the assembled blocks into one AIJ matrix and factorise it."""
+        self.check(system)
+        self.system = system
+        names, interfaces = list(system.bodies), list(system.sizes)
+        n = len(names) + len(interfaces)
+        blocks: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
+        made: list[PETSc.Mat] = []
+        for a, name in enumerate(names):
+            body = system.bodies[name]
+            blocks[a][a] = body.whole_matrix()
+            for m, k in enumerate(interfaces, start=len(names)):
+                if k in body.layers:
+                    B, C = _coupling(body, k, system)
+                    blocks[a][m], blocks[m][a] = B, C
+                    made += [B, C]
+        for m, k in enumerate(interfaces, start=len(names)):
+            blocks[m][m] = _master_block(system, k)
+            made.append(blocks[m][m])
+        nest = PETSc.Mat().createNest(blocks, comm=system.comm)
+        merged = nest.convert("aij", out=PETSc.Mat())
+        destroy(nest, *made)
+        if self.K is not None and merged.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
+            # the same sparsity (a new Newton step): MUMPS keeps its analysis
+            merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            merged.destroy()
+            self.ksp.setOperators(self.K)
+            self.ksp.setUp()
+            return
+        self.destroy()
+        self.K = merged
+        self.ksp = make_ksp(self.K, self.prefix, self.options)
+        if self.monitor is not None:
+
+            def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
+                def iterate() -> Vector:
+                    built = ksp.buildSolution()
+                    values = built.array.copy()
+                    built.destroy()
+                    return values
+
+                self.monitor(iteration, iterate)
+
+            self.ksp.setMonitor(watch)
+
+    def solve(self, b: Vector | None, tolerance: Tolerance) -> tuple[Vector, InterfaceResult]:
+        """One solve; its result counts the iterations of an iterative solve as rounds."""
+        rhs, x = self.K.createVecs()
+        rhs.array[:] = 0.0 if b is None else b
+        self.ksp.solve(rhs, x)
+        reason = self.ksp.getConvergedReason()
+        iterations = self.ksp.getIterationNumber()
+        residual, correction = self.K.createVecs()
+        for _ in range(self.refine):
+            self.K.mult(x, residual)
+            residual.aypx(-1.0, rhs)
+            self.ksp.solve(residual, correction)
+            x.axpy(1.0, correction)
+        out = x.array.copy()
+        destroy(rhs, x, residual, correction)
+        if reason < 0:
+            raise RuntimeError(
+                f"monolithic linear solve failed (PETSc reason {reason} after {iterations} "
+                "iterations)"
+            )
+        return out, InterfaceResult(rounds=max(1, iterations), converged=True)
+
+    def destroy(self) -> None:
+        """Free the merged matrix and its factorisation (collective)."""
+        destroy(self.K, self.ksp)
+        self.K, self.ksp = None, None
+
+
+def _coupling(body: Body, k: str, system: System) -> tuple[PETSc.Mat, PETSc.Mat]:
+    """``B_k P_k`` (body rows × masters of k) and ``P_kᵀ C_k`` (masters × body columns).
+
+    Every stored entry is inserted, zeros included, so that the merged matrix keeps one
+    sparsity pattern from one Newton step to the next.
+    """
+    m = system.sizes[k]
+    local_m = m if system.comm.rank == 0 else 0
+    blocks = body.blocks[k]
+    free = np.setdiff1d(np.arange(body.kept_slice.start, body.kept_slice.stop), body.fixed_kept)
+    B = _from_sparse(  # the rows of fixed DOFs are their conditions alone
+        [(blocks["BP"][free], body.kept[free], np.arange(m))], (body.size, local_m), system
     )
-    if monitor is not None:
-
-        def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
-            built = ksp.buildSolution()
-            parts = np.split(built.array, np.cumsum(sizes))
-            monitor(iteration, dict(zip(bodies, parts, strict=False)))
-            built.destroy()
-
-        ksp.setMonitor(watch)
-    ksp.solve(b, x)
-    if ksp.getConvergedReason() < 0:
-        reason = ksp.getConvergedReason()
-        destroy(*made, nest, K, ksp, b, x)
-        raise RuntimeError(f"monolithic solve failed (PETSc reason {reason})")
-    residual, correction = K.createVecs()
-    for _ in range(refine):
-        K.mult(x, residual)
-        residual.aypx(-1.0, b)
-        ksp.solve(residual, correction)
-        x.axpy(1.0, correction)
-    size = K.getSize()[0]
-    iterations = ksp.getIterationNumber()
-    parts = np.split(x.array, np.cumsum(sizes + layer_sizes)[:-1])
-    temperatures = dict(zip(bodies, parts[: len(bodies)], strict=True))
-    temperatures = {name: part.copy() for name, part in temperatures.items()}
-    masters = {}
-    for k, part in zip(interfaces, parts[len(bodies) :], strict=True):
-        owner = next(blk for blk in blocks.values() if k in blk.layers)
-        masters[k] = _replicate(owner.layers[k].V, part)
-    destroy(*made, nest, K, ksp, b, x, residual, correction)
-    return MonolithicResult(temperatures, masters, time.perf_counter() - start, size, iterations)
+    rows = np.arange(m) if system.comm.rank == 0 else np.zeros(0, dtype=int)
+    parts = [(-blocks["L"][body.position[k][rows]], rows, body.kept)]
+    if "CtP" in blocks:
+        parts.append((blocks["CtP"][rows], rows, body.kept))
+    return B, _from_sparse(parts, (local_m, body.size), system)
 
 
-def _fixed_slave_flux(block: BodyBlocks, k: str, P: PETSc.Mat) -> np.ndarray:
-    """``P_kᵀ M_k g``: the master rows' share of slave DOFs fixed at g (owned part)."""
-    fixed = block.A.createVecLeft()
-    dolfinx.fem.petsc.set_bc(fixed, block.forms.bcs)
-    on_gamma, result = block.A.createVecLeft(), P.createVecRight()
-    block.M_free[k].mult(fixed, on_gamma)
-    P.multTranspose(on_gamma, result)
-    values = result.array.copy()
-    destroy(fixed, on_gamma, result)
-    return values
+def _master_block(system: System, k: str) -> PETSc.Mat:
+    """``Σ_α P_kᵀ D^α_k P_k``, identity on the masters of an insulating channel (dense)."""
+    local = np.zeros((system.sizes[k],) * 2)
+    for body in system.bodies_of(k):
+        local += body.link_stiffness(k)
+    D = system.total({k: local})[k]
+    inactive = ~system.active[k]
+    D[inactive, :] = 0.0
+    D[:, inactive] = 0.0
+    D[inactive, inactive] = 1.0
+    m = system.sizes[k]
+    local_m = m if system.comm.rank == 0 else 0
+    rows = np.arange(m) if system.comm.rank == 0 else np.zeros(0, dtype=int)
+    dense = scipy.sparse.csr_matrix(np.ones((len(rows), m)))
+    dense.data[:] = D[rows].ravel()  # every entry stored, zeros included
+    return _from_sparse([(dense, rows, np.arange(m))], (local_m, local_m), system)
 
 
-def _replicate(V: dolfinx.fem.FunctionSpace, owned: npt.NDArray[np.float64]) -> np.ndarray:
-    """Owned values of a master space as a replicated vector in global DOF order."""
-    return np.concatenate(V.mesh.comm.allgather(np.asarray(owned)))
+def _from_sparse(
+    parts: list[tuple[scipy.sparse.csr_matrix, npt.NDArray, npt.NDArray]],
+    local: tuple[int, int],
+    system: System,
+) -> PETSc.Mat:
+    """A PETSc AIJ matrix of local size ``local``: the sum of this rank's ``parts``.
+
+    Each part is ``(rows_csr, rows, columns)``: row i of ``rows_csr`` is global row
+    ``rows[i]``, its column j global column ``columns[j]``. Every stored entry is added,
+    zeros included.
+    """
+    M = PETSc.Mat().createAIJ(
+        ((local[0], PETSc.DETERMINE), (local[1], PETSc.DETERMINE)), comm=system.comm
+    )
+    widest = max((int(np.diff(csr.indptr).max(initial=0)) for csr, _, _ in parts), default=0)
+    M.setPreallocationNNZ((widest * len(parts), widest * len(parts)))
+    M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    for csr, rows, columns in parts:
+        for i, row in enumerate(rows):
+            span = slice(csr.indptr[i], csr.indptr[i + 1])
+            at = columns[csr.indices[span]].astype(PETSc.IntType)
+            M.setValues([int(row)], at, csr.data[span], addv=PETSc.InsertMode.ADD_VALUES)
+    M.assemble()
+    return M

@@ -29,6 +29,7 @@ error, which at large h can stay far above rtol (demo_error_vs_runtime shows it)
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -37,9 +38,9 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from subdomain_contact.blocks import BodyBlocks
-from subdomain_contact.interfaces import master_layer
-from subdomain_contact.thermal import ThermalProblem, body_forms
+from subdomain_contact.body import Body
+from subdomain_contact.masters import master_layer
+from subdomain_contact.physics import Problem
 
 __all__ = [
     "ACCELERATIONS",
@@ -53,7 +54,7 @@ __all__ = [
 #: The accelerations both couplings offer.
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 
-#: Called after every coupling iteration with its number and body name -> temperature.
+#: Called after every coupling iteration with its number and body name -> its solution.
 Monitor = Callable[[int, dict[str, dolfinx.fem.Function]], None]
 
 
@@ -63,11 +64,11 @@ class PartitionedResult:
 
     Attributes:
         converged: Whether the relative interface change fell below the tolerance.
+        iterations: Coupling iterations (two body solves each).
         diverged: Stopped because the exchanged data grew 1e8-fold past its size in the
             first five iterations, or stopped being finite.
         balance: Heat balance of the contact at the last iteration, relative to the heat
             through it (Dirichlet–Neumann: the relative change, which is that balance).
-        iterations: Coupling iterations (two body solves each).
         history: ``‖x̃ − x‖ / ‖x̃‖`` per iteration.
         temperatures: Body name -> the body's temperature Function [K] at the end.
         data: The last coupling input ``x`` (the temperatures are its body solves).
@@ -86,8 +87,48 @@ class PartitionedResult:
     seconds: float = 0.0
 
 
+class _Side:
+    """One body of a partitioned coupling: solved for given master values and loads."""
+
+    def __init__(self, problem: Problem, name: str, conductance: float) -> None:
+        scene = problem.scene
+        ((k, interface),) = scene.interfaces.items()
+        contacts = {k: dataclasses.replace(problem.contacts[k], conductance=conductance)}
+        own = Problem(scene, problem.materials, contacts, problem.conditions)
+        self.k, self.layer = k, master_layer(own, interface)
+        self.body = Body(own, scene.bodies[name], {k: self.layer}, prefix=f"sc_rr_{name}_")
+        self.body.U.x.array[:] = 0.0
+        self.body.apply_conditions()
+        self.start = self.body.U.x.array.copy()
+        self.body.set_masters({k: np.zeros(self.layer.size)})
+        self.body.assemble()
+        self.body.factorise()
+
+    def solve(
+        self, master: npt.NDArray[np.float64], load: npt.NDArray[np.float64] | None = None
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Temperatures on the contact and the heat [W] the body takes from it.
+
+        ``master``: the temperatures [K] its link sees; ``load``: nodal heat [W] put into the
+        body at its slave DOFs (none at fixed ones), in master order.
+        """
+        body, k = self.body, self.k
+        body.U.x.array[:] = self.start
+        body.set_masters({k: master})
+        F = body.residual()
+        if load is not None:
+            nodal = np.zeros(body.size)
+            body.slaves[k].scatter(load, nodal)
+            nodal[body.fixed_local] = 0.0
+            F -= nodal
+        body.U.x.array[: body.size] -= body.solve(F)  # linear: one Newton step is exact
+        body.U.x.scatter_forward()
+        taken = body.contact_share(k, load)
+        return body.slaves[k].gather(body.U.x.array, self.layer.size, body.comm), taken
+
+
 def solve_robin_robin(
-    problem: ThermalProblem,
+    problem: Problem,
     *,
     acceleration: str = "iqn-ils",
     relaxation: float = 0.5,
@@ -99,7 +140,7 @@ def solve_robin_robin(
     """Serial Robin–Robin coupling of a two-body thermal problem.
 
     Args:
-        problem: Two bodies and one contact interface.
+        problem: Two bodies, one contact interface, temperature alone.
         acceleration: One of :data:`ACCELERATIONS`.
         relaxation: ω of constant relaxation, and the first ω of Aitken and IQN-ILS.
         rtol: Tolerance on ``‖x̃ − x‖ / ‖x̃‖`` (preCICE's relative convergence measure).
@@ -113,12 +154,12 @@ def solve_robin_robin(
     Raises:
         ValueError: Not two bodies and one interface, or an unknown acceleration.
     """
-    iterate, size, bodies = _robin_robin(problem, acceleration)
+    iterate, size, sides = _robin_robin(problem, acceleration)
     update = _Update(acceleration, relaxation)
-    return _couple(iterate, update, size, bodies, rtol, max_iterations, monitor, balance_tol)
+    return _couple(iterate, update, size, sides, rtol, max_iterations, monitor, balance_tol)
 
 
-def robin_robin_map(problem: ThermalProblem) -> Callable[[np.ndarray], np.ndarray]:
+def robin_robin_map(problem: Problem) -> Callable[[np.ndarray], np.ndarray]:
     """The Robin-Robin iteration ``x ↦ x̃`` itself (B's interface temperatures [K]).
 
     It is affine, ``x̃ = M x + c``: probing it gives the iteration matrix M, whose
@@ -128,25 +169,21 @@ def robin_robin_map(problem: ThermalProblem) -> Callable[[np.ndarray], np.ndarra
     return lambda x: iterate(x)[0]
 
 
-def _robin_robin(problem: ThermalProblem, acceleration: str):
-    """One Robin-Robin iteration ``x ↦ (x̃, heat balance)``, the data size and the bodies."""
-    k, size, (first, second) = _bodies(problem, acceleration, "Robin-Robin", neumann=False)
+def _robin_robin(problem: Problem, acceleration: str):
+    """One Robin-Robin iteration ``x ↦ (x̃, heat balance)``, the data size and the sides."""
+    first, second = _sides(problem, acceleration, "Robin-Robin", neumann=False)
 
     def iterate(x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
-        T = first.solve({k: x})
-        taken = first.residuals({k: x})[k]  # heat A takes from the contact [W]
-        data = first.slaves[k].gather(T.x.array, size, first.comm)
-        T = second.solve({k: data})
-        given = second.residuals({k: data})[k]  # heat B takes from it
+        data, taken = first.solve(x)  # heat A takes from the contact [W]
+        output, given = second.solve(data)  # heat B takes from it
         scale = max(float(np.linalg.norm(given)), float(np.linalg.norm(taken)), 1e-300)
-        output = second.slaves[k].gather(T.x.array, size, second.comm)
         return output, float(np.linalg.norm(taken + given)) / scale
 
-    return iterate, size, (first, second)
+    return iterate, first.layer.size, (first, second)
 
 
 def solve_dirichlet_neumann(
-    problem: ThermalProblem,
+    problem: Problem,
     *,
     acceleration: str = "iqn-ils",
     relaxation: float = 0.5,
@@ -160,14 +197,14 @@ def solve_dirichlet_neumann(
     Arguments as :func:`solve_robin_robin`. Body A must have a temperature condition (it is
     solved with the contact as a pure Neumann boundary); a floating A fails its solve.
     """
-    k, size, (first, second) = _bodies(problem, acceleration, "Dirichlet-Neumann", neumann=True)
+    first, second = _sides(problem, acceleration, "Dirichlet-Neumann", neumann=True)
+    size = first.layer.size
 
     def iterate(x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float | None]:
-        T = first.solve({k: np.zeros(size)}, loads={k: -x})  # x: heat leaving A [W]
-        data = first.slaves[k].gather(T.x.array, size, first.comm)
-        second.solve({k: data})
+        data, _ = first.solve(np.zeros(size), load=-x)  # x: heat leaving A [W]
+        _, given = second.solve(data)
         # the heat B takes [W]; its change from x is the heat balance itself
-        return second.residuals({k: data})[k], None
+        return given, None
 
     update = _Update(acceleration, relaxation)
     return _couple(
@@ -175,40 +212,38 @@ def solve_dirichlet_neumann(
     )
 
 
-def _bodies(
-    problem: ThermalProblem, acceleration: str, coupling: str, *, neumann: bool
-) -> tuple[str, int, tuple[BodyBlocks, BodyBlocks]]:
-    """The interface, its size and the two bodies, factorised.
+def _sides(problem: Problem, acceleration: str, coupling: str, *, neumann: bool):
+    """The two bodies, factorised, each linked directly to the partner's values.
 
-    The first body has no contact link when it takes a Neumann datum.
+    A link of conductance h to the partner's values stands where the half-link was; the
+    first body has none when it takes a Neumann datum.
     """
     scene = problem.scene
-    if len(scene.bodies) != 2 or len(scene.interfaces) != 1 or not scene.shared:
-        raise ValueError(f"{scene.source}: {coupling} coupling needs two bodies, one interface")
+    if (
+        len(scene.bodies) != 2
+        or len(scene.interfaces) != 1
+        or not scene.shared
+        or problem.fields != ("temperature",)
+    ):
+        raise ValueError(
+            f"{scene.source}: {coupling} coupling needs two bodies, one interface, heat alone"
+        )
     if acceleration not in ACCELERATIONS:
         raise ValueError(f"acceleration = {acceleration!r}: one of {ACCELERATIONS}")
     ((k, interface),) = scene.interfaces.items()
-    layer = master_layer(interface)
-    h = problem.contacts[k].conductance
-    bodies = tuple(
-        BodyBlocks(
-            name,
-            body_forms(problem, scene.bodies[name]),
-            scene.bodies[name].facet_tags,
-            {k: layer},
-            # the partner's temperature stands where the master was: a direct link
-            {k: 0.0 if neumann and i == 0 else h},
-        )
+    h = float(problem.contacts[k].conductance)
+    # a half-link of conductance h/2 is a direct link h to the partner's temperature
+    return tuple(
+        _Side(problem, name, 0.0 if neumann and i == 0 else h / 2)
         for i, name in enumerate(interface.bodies)
     )
-    return k, layer.size, bodies
 
 
 def _couple(
-    iterate: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]],
+    iterate: Callable,
     update: _Update,
     size: int,
-    bodies: tuple[BodyBlocks, BodyBlocks],
+    sides: tuple[_Side, _Side],
     rtol: float,
     max_iterations: int,
     monitor: Monitor | None,
@@ -219,7 +254,7 @@ def _couple(
     x = np.zeros(size)
     result = PartitionedResult(False, 0)
     first, divergence = 0.0, 1e8
-    temperatures = {body.name: body.T for body in bodies}
+    temperatures = {side.body.name: side.body.U for side in sides}
     for iteration in range(1, max_iterations + 1):
         output, balance = iterate(x)
         change = float(np.linalg.norm(output - x) / max(np.linalg.norm(output), 1e-300))
@@ -239,6 +274,8 @@ def _couple(
         x = update(x, output)
     result.temperatures = temperatures
     result.seconds = time.perf_counter() - start
+    for side in sides:
+        side.body.destroy()
     return result
 
 

@@ -5,10 +5,12 @@ returns the dense Schur complement ``Σ = K_ss − K_si K_ii⁻¹ K_is`` (MUMPS 
 PETSc's ``MatFactorSetSchurIS``): the condensed stiffness costs one sparse factorisation,
 where forming it column by column costs one solve per kept row. Replacing the Schur block
 by ``Σ + H`` (dense, factorised by LAPACK) then makes every solve a solve with ``K + H``, for
-any ``H`` that touches the kept rows only: a contact's half-links.
+any ``H`` that touches the kept rows only: a body's half-links. A new ``H`` (contact laws that
+changed with the pressure or the temperature) needs no new sparse factorisation.
 
 PETSc computes Schur complements of a matrix held by one rank only. petsc4py does not wrap
-the Schur calls, so they go to the PETSc library through ``ctypes``.
+the Schur calls: they go to the PETSc library that petsc4py itself loaded, through ``ctypes``
+with declared argument types.
 """
 
 from __future__ import annotations
@@ -20,22 +22,30 @@ import numpy as np
 import numpy.typing as npt
 from petsc4py import PETSc
 
-from subdomain_contact.solvers import Reaper
-
 __all__ = ["CondensedFactor"]
 
 Matrix = npt.NDArray[np.float64]
 _UNFACTORED = 0  # MatFactorSchurStatus MAT_FACTOR_SCHUR_UNFACTORED
+_handle, _int = ctypes.c_void_p, ctypes.c_int
+_SIGNATURES = {
+    "MatFactorSetSchurIS": (_handle, _handle),
+    "MatFactorGetSchurComplement": (_handle, ctypes.POINTER(_handle), ctypes.POINTER(_int)),
+    "MatFactorRestoreSchurComplement": (_handle, ctypes.POINTER(_handle), _int),
+    "MatFactorFactorizeSchurComplement": (_handle,),
+    "MatDenseGetLDA": (_handle, ctypes.c_void_p),
+    "MatDenseGetArray": (_handle, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))),
+    "MatDenseRestoreArray": (_handle, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))),
+}
 
 
 @functools.cache
 def _petsc() -> ctypes.CDLL:
-    """The PETSc library petsc4py has loaded (the same instance, found by its path)."""
-    with open("/proc/self/maps") as maps:
-        for line in maps:
-            if "libpetsc.so" in line:
-                return ctypes.CDLL(line.split()[-1])
-    raise RuntimeError("the PETSc library is not loaded: import petsc4py first")
+    """petsc4py's extension module: its symbol lookup reaches the PETSc library it loaded."""
+    library = ctypes.CDLL(PETSc.__file__)
+    for name, arguments in _SIGNATURES.items():
+        function = getattr(library, name)
+        function.argtypes, function.restype = arguments, _int
+    return library
 
 
 def _call(name: str, *args: object) -> None:
@@ -47,10 +57,12 @@ def _call(name: str, *args: object) -> None:
 class CondensedFactor:
     """Solver of ``K + H`` from an LU of ``K`` by MUMPS whose ``kept`` rows are left dense.
 
+    Call :meth:`destroy` (collectively) when done.
+
     Args:
         K: Square matrix on a communicator of one rank.
         kept: Local indices of the kept rows (the order of ``sigma``'s rows and columns).
-        added: ``H``, dense on the kept rows (zero: solves with K).
+        added: ``H``, dense on the kept rows.
         prefix: PETSc options prefix of the factorisation (``-<prefix>mat_mumps_icntl_*``).
 
     Attributes:
@@ -61,14 +73,13 @@ class CondensedFactor:
         self,
         K: PETSc.Mat,
         kept: npt.NDArray[np.int32],
-        added: npt.NDArray[np.float64],
+        added: Matrix,
         prefix: str,
     ) -> None:
         if K.getComm().getSize() != 1:
             raise ValueError(f"{prefix}: a Schur complement needs the matrix on one rank")
-        self.size = len(kept)
+        self.size, self.prefix = len(kept), prefix
         self.pc = PETSc.PC().create(K.getComm())
-        self._ticket = Reaper.register(self.pc)
         self.pc.setOptionsPrefix(prefix)
         self.pc.setOperators(K)
         self.pc.setType("lu")
@@ -77,38 +88,46 @@ class CondensedFactor:
         self.pc.setFactorSetUpSolverType()
         self.F = self.pc.getFactorMatrix()
         rows = PETSc.IS().createGeneral(np.asarray(kept, dtype=PETSc.IntType), comm=K.getComm())
-        _call("MatFactorSetSchurIS", ctypes.c_void_p(self.F.handle), ctypes.c_void_p(rows.handle))
+        _call("MatFactorSetSchurIS", self.F.handle, rows.handle)
         rows.destroy()
+        self._factorise(K)
+        self.update(added)
+
+    def refactor(self, K: PETSc.Mat, added: Matrix) -> None:
+        """Factorise new values of the same sparsity pattern (MUMPS's analysis is kept)."""
+        self.pc.setOperators(K)
+        self._factorise(K)
+        self.update(added)
+
+    def _factorise(self, K: PETSc.Mat) -> None:
         self.pc.setUp()
         if self.pc.getFailedReason() != 0:
-            raise RuntimeError(f"{prefix}: factorisation failed ({self.pc.getFailedReason()})")
+            raise RuntimeError(f"{self.prefix}: factorisation failed ({self.pc.getFailedReason()})")
+        self.sigma = self._write_block(None)
+
+    def update(self, added: Matrix) -> None:
+        """Make the dense block ``Σ + added`` and factorise it: solves are then with ``K + H``."""
         if added.shape != (self.size, self.size) or not np.all(np.isfinite(added)):
-            raise ValueError(f"{prefix}: H must be a finite square matrix on the kept rows")
-        self.sigma = self._add_to_schur(added)
-        _call("MatFactorFactorizeSchurComplement", ctypes.c_void_p(self.F.handle))
+            raise ValueError(f"{self.prefix}: H must be a finite square matrix on the kept rows")
+        self._write_block(self.sigma + added)
+        _call("MatFactorFactorizeSchurComplement", self.F.handle)
 
-    def __del__(self) -> None:
-        if "_ticket" in self.__dict__:
-            Reaper.release(self._ticket)
-
-    def _add_to_schur(self, added: Matrix) -> Matrix:
-        """Add ``added`` to the unfactored Schur block Σ in place; return a copy of Σ."""
-        S, status = ctypes.c_void_p(), ctypes.c_int()
-        F = ctypes.c_void_p(self.F.handle)
-        _call("MatFactorGetSchurComplement", F, ctypes.byref(S), ctypes.byref(status))
-        if status.value != _UNFACTORED:
-            raise RuntimeError("the Schur block was factorised already")
+    def _write_block(self, block: Matrix | None) -> Matrix:
+        """Overwrite the Schur block with ``block`` (unfactored); return what it held."""
+        S, status = _handle(), _int()
+        _call("MatFactorGetSchurComplement", self.F.handle, ctypes.byref(S), ctypes.byref(status))
         lead = np.zeros(1, dtype=PETSc.IntType)
         _call("MatDenseGetLDA", S, lead.ctypes.data_as(ctypes.c_void_p))
         values = ctypes.POINTER(ctypes.c_double)()
         _call("MatDenseGetArray", S, ctypes.byref(values))
         # column-major storage: row j of ``columns`` is column j of the block
         columns = np.ctypeslib.as_array(values, shape=(self.size, int(lead[0])))[:, : self.size]
-        sigma = columns.T.copy()
-        columns += added.T
+        held = columns.T.copy()
+        if block is not None:
+            columns[:] = block.T
         _call("MatDenseRestoreArray", S, ctypes.byref(values))
-        _call("MatFactorRestoreSchurComplement", F, ctypes.byref(S), ctypes.c_int(_UNFACTORED))
-        return sigma
+        _call("MatFactorRestoreSchurComplement", self.F.handle, ctypes.byref(S), _UNFACTORED)
+        return held
 
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """``x = (K + H)⁻¹ b``.
@@ -117,3 +136,7 @@ class CondensedFactor:
         ``inf`` on PETSc 3.25.5.
         """
         self.F.solve(b, x)
+
+    def destroy(self) -> None:
+        """Free the factorisation (collective on its one rank)."""
+        self.pc.destroy()

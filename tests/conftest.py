@@ -1,10 +1,10 @@
-"""Shared fixtures: every test runs on MPI.COMM_WORLD, serially or under mpiexec."""
+"""Shared fixtures and helpers: every test runs on MPI.COMM_WORLD, serially or under mpiexec."""
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
 import pytest
 from mpi4py import MPI
 
-from subdomain_contact.cases import two_plates_scene
+from verification.cases import two_plates_scene
 
 
 @pytest.fixture(scope="session")
@@ -24,6 +24,28 @@ def plates_fine(comm):
     return two_plates_scene(8, 6, quads=False, comm=comm)
 
 
+@pytest.fixture(autouse=True)
+def collect_garbage(comm):
+    """After each test, with every rank at the same point: free what it left behind.
+
+    The systems the helpers made are destroyed (collectively); Python collects the rest and
+    petsc4py hands parallel PETSc objects to PETSc's garbage, which ``garbage_cleanup``
+    destroys collectively (a MUMPS factorisation's destruction is collective), so that
+    communicators do not run out.
+    """
+    yield
+    import gc
+
+    from helpers import SYSTEMS
+    from petsc4py import PETSc
+
+    for system in SYSTEMS:
+        system.destroy()
+    SYSTEMS.clear()
+    gc.collect()
+    PETSc.garbage_cleanup(comm)
+
+
 @pytest.fixture
 def shared_tmp(tmp_path, comm):
     """One temporary folder that every rank agrees on."""
@@ -33,14 +55,13 @@ def shared_tmp(tmp_path, comm):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    """Free what the tests left while MPI and PETSc are still alive, on every rank together."""
+    """Free what the tests left to petsc4py while MPI is alive, on every rank together."""
     import gc
 
-    from subdomain_contact.solvers import Reaper
+    from petsc4py import PETSc
 
     gc.collect()
-    Reaper.collect(MPI.COMM_WORLD)
-    gc.collect()
+    PETSc.garbage_cleanup(MPI.COMM_WORLD)
 
 
 def pytest_assertion_pass(item, lineno, orig, expl):

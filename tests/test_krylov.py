@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 import scipy.linalg
+from helpers import linear_solve, monolithic, snapshot
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from subdomain_contact.cases import stack, stack_scene
-from subdomain_contact.geometry import gather_rows, match_points
-from subdomain_contact.krylov import _InterfaceSystem
-from subdomain_contact.verification import relative_nodal_error
+from subdomain_contact.scene import gather_rows, match_points
+from verification.cases import GEO, stack, stack_scene
+from verification.nodal import field_values, relative_nodal_error
 
 EPS = np.finfo(float).eps
 
@@ -19,51 +19,49 @@ def chain(comm):
     return stack_scene(8, 2, 2, comm=comm)
 
 
-def difference_from_monolithic(solver, result):
-    reference = sc.solve_monolithic(solver.blocks)
-    spaces = {n: b.V for n, b in solver.blocks.items()}
-    values = {n: T.x.array for n, T in result.temperatures.items()}
-    return relative_nodal_error(spaces, values, reference.temperatures)
+def difference_from_monolithic(system):
+    values, _ = snapshot(system)
+    monolithic(system)
+    spaces, reference = field_values(system)
+    return relative_nodal_error(spaces, values, reference, comm=system.comm)
 
 
 @pytest.mark.parametrize("h", [1e-4, 1.0, 1e4, 1e8])
 def test_cg_on_floating_chain_equals_monolithic(chain, h):
-    solver = sc.ThermalSubdomains(stack(chain, h=h))
-    result = sc.solve_interface_krylov(solver, rtol=1e-10)
+    system, result = linear_solve(stack(chain, h=h), rtol=1e-10)
+    assert result.krylov_iterations  # floating bodies: Krylov by default
     assert result.history[-1] <= 1e-10  # the stopping rule, checked on the true residual
     # CG ends, in exact arithmetic, within as many iterations as the interface problem has
     # unknowns (7 interfaces × 3 masters); measured 6 to 13 per solve
-    masters = sum(layer.size for layer in solver.layers.values())
+    masters = sum(system.sizes.values())
     assert max(result.krylov_iterations) <= masters == 21
     # The merged reference is a direct solve whose condition grows with h̄ (in units of the
     # bodies' k/L = 1): measured differences 2e-15, 4e-14, 4e-12, 8e-8 at h = 1e-4 … 1e8,
     # i.e. at most 8 eps h above h = 1. The bound 1e-12 + 100 eps h leaves 25 times that.
-    assert difference_from_monolithic(solver, result) <= 1e-12 + 100 * EPS * h
+    assert difference_from_monolithic(system) <= 1e-12 + 100 * EPS * h
 
 
 def test_cg_is_exact_against_the_1d_chain(chain):
     """No top cooling: a 1D chain of resistances, nodal-exact with P1 (h = 1e10)."""
     h = 1e10
     problem = stack(chain, h=h, cooled=False)
-    problem = sc.ThermalProblem(
+    problem = sc.Problem(
         chain,
-        {name: sc.ThermalMaterial(m.conductivity) for name, m in problem.materials.items()},
+        {n: sc.Material(conductivity=m.conductivity) for n, m in problem.materials.items()},
         problem.contacts,
         problem.conditions,
     )
-    solver = sc.ThermalSubdomains(problem)
-    result = sc.solve_interface_krylov(solver, rtol=1e-12)
+    system, _ = linear_solve(problem, rtol=1e-12)
     k = [problem.materials[f"body_{i}"].conductivity for i in range(8)]
     resistance = sum(1 / ki for ki in k) + 7 / h + 1 / 2.0
     q = 1.0 / resistance
-    spaces = {n: b.V for n, b in solver.blocks.items()}
 
     def exact(i):
         drop_before = sum(1 / k[j] for j in range(i)) * q + i * q / h
         return lambda x: 1.0 - drop_before - q * (x[:, 0] - i) / k[i]
 
+    spaces, values = field_values(system)
     reference = {f"body_{i}": exact(i) for i in range(8)}
-    values = {n: T.x.array for n, T in result.temperatures.items()}
     # nodally exact P1 in 1D, solved to rtol 1e-12: measured 1.9e-14 (3.0e-14 on 2 ranks),
     # 1e-9 leaves 3e4 times that at h = 1e10
     assert relative_nodal_error(spaces, values, reference) <= 1e-9
@@ -81,31 +79,34 @@ def test_iterations_barely_grow_with_the_mesh(comm):
     for refinement in (1, 4):
         scene = stack_scene(8, 2 * refinement, 2 * refinement, comm=comm)
         for h in (1e-4, 1.0, 1e10):
-            solver = sc.ThermalSubdomains(stack(scene, h=h))
-            counts[refinement, h] = sum(sc.solve_interface_krylov(solver).krylov_iterations)
+            _, result = linear_solve(stack(scene, h=h))
+            counts[refinement, h] = sum(result.krylov_iterations)
     for h in (1e-4, 1.0, 1e10):
         assert counts[4, h] <= counts[1, h] + 2
 
 
 def test_matrix_free_equals_dense(chain):
-    solver = sc.ThermalSubdomains(stack(chain, h=30.0))
-    dense = sc.solve_interface_krylov(solver, dense_limit=10_000)
-    masters = {k: v.copy() for k, v in dense.masters.items()}
-    free = sc.solve_interface_krylov(solver, dense_limit=0)
-    assert dense.dense_bodies == 8 and free.dense_bodies == 0
+    problem = stack(chain, h=30.0)
+    dense_system, dense = linear_solve(problem, dense_limit=10_000)
+    free_system, free = linear_solve(problem, dense_limit=0)
+    assert dense.applications == 0 and free.applications > 0
     # the same operator to round-off: the same CG, whose answers differ by round-off
     # amplified by the interface problem's condition (masters are O(1) K)
     assert free.krylov_iterations == dense.krylov_iterations
-    for k, values in masters.items():
-        assert np.allclose(free.masters[k], values, rtol=1e-10, atol=1e-12)
+    for k, values in dense_system.masters.items():
+        assert np.allclose(free_system.masters[k], values, rtol=1e-10, atol=1e-12)
 
 
-def preconditioned_condition(solver, *, coarse: bool) -> float:
+def preconditioned_condition(problem, *, coarse: bool) -> float:
     """κ(P S) of the interface problem: S and its preconditioner P formed column by column."""
-    system = _InterfaceSystem(solver, dense_limit=10**6, coarse=coarse)
-    unit = np.eye(system.size)
-    S = np.column_stack([system.apply(e) for e in unit])
-    P = np.column_stack([system.precondition(e) for e in unit])
+    with sc.System(problem) as system:
+        system.reset()
+        system.assemble_jacobian()
+        solver = sc.Subdomains(krylov=True, coarse=coarse)
+        solver.setup(system)
+        unit = np.eye(solver.size)
+        S = np.column_stack([solver.apply(e) for e in unit])
+        P = np.column_stack([solver.precondition(e) for e in unit])
     eigenvalues = scipy.linalg.eigvalsh(0.5 * (S + S.T), np.linalg.inv(0.5 * (P + P.T)))
     return float(eigenvalues.max() / eigenvalues.min())
 
@@ -123,10 +124,9 @@ def test_coarse_space_keeps_a_long_floating_chain_fast(comm):
     kappa, iterations = {}, {}
     for n in (8, 32):
         problem = stack(stack_scene(n, 2, 2, comm=comm), h=1e4, cooled=False)
-        solver = sc.ThermalSubdomains(problem)
         for coarse in (True, False):
-            kappa[n, coarse] = preconditioned_condition(solver, coarse=coarse)
-            result = sc.solve_interface_krylov(solver, coarse=coarse)
+            kappa[n, coarse] = preconditioned_condition(problem, coarse=coarse)
+            _, result = linear_solve(problem, coarse=coarse)
             iterations[n, coarse] = sum(result.krylov_iterations)
     assert kappa[32, True] <= 1.1 * kappa[8, True]
     assert kappa[32, False] >= 8 * kappa[8, False]
@@ -135,27 +135,26 @@ def test_coarse_space_keeps_a_long_floating_chain_fast(comm):
 
 
 def test_paper_fixed_point_stalls_where_cg_converges(chain):
-    solver = sc.ThermalSubdomains(stack(chain, h=1e4))
-    with pytest.raises(sc.SubdomainConvergenceError, match="no convergence"):
-        solver.solve(rtol=1e-10, max_rounds=100)
-    assert sc.solve_interface_krylov(solver).history[-1] <= 1e-10  # its stopping rule
+    problem = stack(chain, h=1e4)
+    with pytest.raises(sc.SubdomainConvergenceError, match="use krylov=True"):
+        linear_solve(problem, rtol=1e-10, krylov=False, max_rounds=100)
+    _, result = linear_solve(problem, rtol=1e-10)
+    assert result.history[-1] <= 1e-10  # its stopping rule
 
 
 def test_distributed_equals_serial(comm):
     solutions = {}
     for label, c in [("world", comm), ("self", MPI.COMM_SELF)]:
-        solver = sc.ThermalSubdomains(stack(stack_scene(8, 3, 3, comm=c), h=100.0))
-        result = sc.solve_interface_krylov(solver, rtol=1e-12)
-        solutions[label] = (solver, result)
+        solutions[label] = linear_solve(stack(stack_scene(8, 3, 3, comm=c), h=100.0), rtol=1e-12)
     (world, r_world), (serial, r_serial) = solutions["world"], solutions["self"]
     assert r_world.krylov_iterations == r_serial.krylov_iterations
-    for name in world.blocks:
-        V_w, V_s = world.blocks[name].V, serial.blocks[name].V
+    for name in world.bodies:
+        V_w, u_w = field_values(world)[0][name], world.bodies[name].U.x.array
+        V_s, u_s = field_values(serial)[0][name], serial.bodies[name].U.x.array
         n_w = V_w.dofmap.index_map.size_local
         x_w = gather_rows(comm, V_w.tabulate_dof_coordinates()[:n_w])
-        u_w = gather_rows(comm, r_world.temperatures[name].x.array[:n_w])
-        x_s, u_s = V_s.tabulate_dof_coordinates(), r_serial.temperatures[name].x.array
-        order = match_points(x_s, x_w, what=name)
+        u_w = gather_rows(comm, u_w[:n_w])
+        order = match_points(V_s.tabulate_dof_coordinates(), x_w, what=name)
         # the same CG on the same operator; the distributed body solves sum in another
         # order: round-off only (measured ≤ 1e-14 relative on 2 ranks, 0 serially)
         assert np.abs(u_w - u_s[order]).max() <= 1e-12 * np.abs(u_s).max()
@@ -164,7 +163,7 @@ def test_distributed_equals_serial(comm):
 @pytest.fixture(scope="module")
 def junction(comm):
     return sc.load_scene(
-        sc.cases.GEO / "junction.geo",
+        GEO / "junction.geo",
         bodies=["base", "left", "middle", "right"],
         interfaces=["base_left", "base_middle", "base_right", "left_middle", "middle_right"],
         parameters={"cells": 4},
@@ -177,10 +176,10 @@ def test_body_touching_three_others_and_triple_points(junction, h):
     """ "middle" touches base, left and right; three bodies meet at two points; the held
     top of "middle" fixes slave nodes of two contacts; "left" and "right" float."""
     conductivities = {"base": 1.0, "left": 5.0, "middle": 0.2, "right": 1.0}
-    problem = sc.ThermalProblem(
+    problem = sc.Problem(
         junction,
-        {b: sc.ThermalMaterial(k) for b, k in conductivities.items()},
-        {k: sc.ThermalContact(h) for k in junction.interfaces},
+        {b: sc.Material(conductivity=k) for b, k in conductivities.items()},
+        {k: sc.Contact(conductance=h) for k in junction.interfaces},
         [
             sc.Temperature("floor", 0.0),
             sc.Temperature("middle_top", 1.0),
@@ -188,45 +187,35 @@ def test_body_touching_three_others_and_triple_points(junction, h):
             sc.HeatFlux("right_top", 2.0),
         ],
     )
-    solver = sc.ThermalSubdomains(problem)
-    result = sc.solve_interface_krylov(solver, rtol=1e-10)
+    system, result = linear_solve(problem, rtol=1e-10)
     assert result.history[-1] <= 1e-10  # its stopping rule
     # measured ≤ 1.5e-12 (at h = 1e4, the reference's own round-off; 1.1e-13 below):
     # 1e-10 leaves 65 times that
-    assert difference_from_monolithic(solver, result) <= 1e-10
+    assert difference_from_monolithic(system) <= 1e-10
 
 
 def test_bodies_on_rank_groups_equal_serial(comm):
     """placement="groups": each body solved by its own rank group; same numbers as serial."""
-    grouped = stack_scene(8, 3, 3, comm=comm)
-    grouped = sc.load_scene(
-        grouped.source,
-        bodies=list(grouped.bodies),
-        interfaces=list(grouped.interfaces),
-        parameters={"bodies": 8, "layers": 3, "rows": 3},
-        comm=comm,
-        placement="groups",
-    )
+    grouped = stack_scene(8, 3, 3, comm=comm, placement="groups")
     assert len(grouped.group_roots) == min(comm.size, 8)
-    solver = sc.ThermalSubdomains(stack(grouped, h=100.0))
-    result = sc.solve_interface_krylov(solver, rtol=1e-12)
-    serial = sc.ThermalSubdomains(stack(stack_scene(8, 3, 3, comm=MPI.COMM_SELF), h=100.0))
-    expected = sc.solve_interface_krylov(serial, rtol=1e-12)
+    system, result = linear_solve(stack(grouped, h=100.0), rtol=1e-12)
+    serial, expected = linear_solve(stack(stack_scene(8, 3, 3, comm=MPI.COMM_SELF), h=100.0),
+                                    rtol=1e-12)  # fmt: skip
     assert result.krylov_iterations == expected.krylov_iterations
     worst = 0.0
-    for name, T in result.temperatures.items():
-        V = solver.blocks[name].V
+    for name, body in system.bodies.items():
+        V = field_values(system)[0][name]
         n = V.dofmap.index_map.size_local
         x = gather_rows(V.mesh.comm, V.tabulate_dof_coordinates()[:n])
-        u = gather_rows(V.mesh.comm, T.x.array[:n])
-        V_s = serial.blocks[name].V
+        u = gather_rows(V.mesh.comm, body.U.x.array[:n])
+        V_s = field_values(serial)[0][name]
         order = match_points(V_s.tabulate_dof_coordinates(), x, what=name)
-        worst = max(worst, float(np.abs(u - expected.temperatures[name].x.array[order]).max()))
+        worst = max(worst, float(np.abs(u - serial.bodies[name].U.x.array[order]).max()))
     # round-off of the same solves summed in another order (measured 1.6e-15 on 2 ranks, on
     # temperatures of order 1 K)
     assert comm.allreduce(worst, op=MPI.MAX) <= 1e-12
-    for k, values in result.masters.items():
-        assert np.abs(values - expected.masters[k]).max() <= 1e-12
+    for k, values in system.masters.items():
+        assert np.abs(values - serial.masters[k]).max() <= 1e-12
     if comm.size > 1:
-        with pytest.raises(ValueError, match="different rank groups"):
-            sc.solve_monolithic(solver.blocks)
+        with pytest.raises(ValueError, match="placement='shared'"):
+            monolithic(system)

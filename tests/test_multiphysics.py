@@ -4,29 +4,28 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+from helpers import make_system
 from mpi4py import MPI
 
+import subdomain_contact as sc
 from subdomain_contact import laws
-from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
-from subdomain_contact.cases import (
+from subdomain_contact.physics import (
+    Contact,
+    Displacement,
+    Material,
+    Penalty,
+    Potential,
+    Problem,
+    Temperature,
+)
+from verification.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
+from verification.cases import (
     GEO,
     bars_scene,
     joule_bars,
     squeezed_joule_bars,
     steel_blocks_between_walls,
 )
-from subdomain_contact.coupled import CoupledSystem
-from subdomain_contact.geometry import load_scene
-from subdomain_contact.multiphysics import (
-    Contact,
-    CoupledProblem,
-    Displacement,
-    Material,
-    Penalty,
-    Potential,
-)
-from subdomain_contact.newton import NewtonConvergenceError, solve_newton
-from subdomain_contact.thermal import Temperature
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +45,9 @@ def max_nodal_error(system, truth, field, comm):
     return comm.allreduce(worst, op=MPI.MAX) / comm.allreduce(scale, op=MPI.MAX)
 
 
+LINEAR = {"subdomain": sc.Subdomains, "monolithic": sc.Monolithic}
+
+
 def contact_displacements(system, comm):
     """Body name -> mean u_x [m] of its nodes on the contact plane x = 0.5 (global)."""
     ux = {}
@@ -58,21 +60,24 @@ def contact_displacements(system, comm):
 
 
 def test_thermal_only_scene_builds_no_potential_or_displacement(bars, comm):
-    problem = CoupledProblem(
+    problem = Problem(
         bars,
-        {"plate_A": Material(conductivity=2.0, heat_source=50.0), "plate_B": Material(5.0)},
+        {
+            "plate_A": Material(conductivity=2.0, heat_source=50.0),
+            "plate_B": Material(conductivity=5.0),
+        },
         {"contact": Contact(conductance=3.0)},
         [Temperature("left", 1.0), Temperature("right", 0.0)],
     )
     assert problem.fields == ("temperature",)
-    system = CoupledSystem(problem)
+    system = make_system(problem)
     for body in system.bodies.values():
-        W = body.physics.W
+        W = body.forms.W
         assert W.num_sub_spaces == 0 and W.dofmap.index_map_bs == 1
         assert W.element.basix_element.value_size == 1
-    assert system.channels == {"contact": [("temperature", None)]}
+    assert system.layers["contact"].channels == (("temperature", None),)
     assert system.num_dofs()["masters"] == 3
-    solve_newton(system)
+    sc.solve(system)
     exact = TwoPlates(0.5, 0.5, 2.0, 5.0, 3.0, 1.0, 0.0, 50.0, 0.0)
     truth = {"plate_A": exact.temperature_a, "plate_B": exact.temperature_b}
     # linear: one Newton step, whose inner solve is exact (the exact corrector), so round-off
@@ -85,9 +90,9 @@ def joule_problem(scene, *, voltage=0.5, h=2e3, g=5e4):
 
 
 def test_joule_bars_match_the_closed_form(bars, comm):
-    system = CoupledSystem(joule_problem(bars))
+    system = make_system(joule_problem(bars))
     system.reset({"temperature": 300.0})
-    result = solve_newton(system, rtol=1e-12)
+    result = sc.solve(system, rtol=1e-12)
     exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 0.5, 300.0, 320.0)
     temperature = {"plate_A": exact.thermal.temperature_a, "plate_B": exact.thermal.temperature_b}
     potential = {"plate_A": exact.potential_a, "plate_B": exact.potential_b}
@@ -115,9 +120,9 @@ def expansion_problem(scene, temperature, *, gap=1e-4):
 
 @pytest.mark.parametrize("temperature", [350.0, 250.0])
 def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
-    system = CoupledSystem(expansion_problem(bars, temperature))
+    system = make_system(expansion_problem(bars, temperature))
     system.reset({"temperature": 300.0})
-    solve_newton(system, rtol=1e-12)
+    sc.solve(system, rtol=1e-12)
     exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, 1e-4, 1e13)
     heating = temperature - 300.0
     pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
@@ -136,11 +141,11 @@ def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
 
 
 def test_coupled_newton_equals_monolithic_and_converges_quadratically(bars):
-    system = CoupledSystem(squeezed_joule_bars(bars))
+    system = make_system(squeezed_joule_bars(bars))
     states, results = {}, {}
     for linear in ("subdomain", "monolithic"):
         system.reset({"temperature": 300.0})
-        results[linear] = solve_newton(system, linear=linear, rtol=1e-12)
+        results[linear] = sc.solve(system, LINEAR[linear](), rtol=1e-12)
         states[linear] = system.state()
     # both stop at rtol 1e-12 per field: measured 3e-16 to 5e-16 apart
     difference = system.difference(states["subdomain"], states["monolithic"])
@@ -168,13 +173,14 @@ def test_coupled_newton_equals_monolithic_and_converges_quadratically(bars):
 
 def test_method1_corrector_gives_the_same_answer_with_more_rounds(bars):
     # method 1 is the small-h corrector: soft contacts (h̄ ≈ k/Δx / 4, ḡ ≈ σ/Δx / 40)
-    system = CoupledSystem(joule_problem(bars, h=10.0, g=1e3))
+    system = make_system(joule_problem(bars, h=10.0, g=1e3))
     states, rounds = {}, {}
-    for corrector in ("exact", "method1"):
+    for corrector in (sc.Exact(), sc.Method1()):
         system.reset({"temperature": 300.0})
-        result = solve_newton(system, corrector=corrector, rtol=1e-12, max_rounds=400)
-        states[corrector] = system.state()
-        rounds[corrector] = sum(s.inner_rounds for s in result.history)
+        linear = sc.Subdomains(corrector, max_rounds=400)
+        result = sc.solve(system, linear, rtol=1e-12)
+        states[corrector.name] = system.state()
+        rounds[corrector.name] = sum(s.inner_rounds for s in result.history)
     # both converge to rtol 1e-12: measured 7e-15 apart
     assert max(system.difference(states["method1"], states["exact"]).values()) < 1e-8
     # the exact corrector takes 2 rounds a step; method 1 contracts by h̄M/(h̄M + K̂) ≈ 0.2
@@ -184,19 +190,19 @@ def test_method1_corrector_gives_the_same_answer_with_more_rounds(bars):
 
 
 def test_newton_failure_reports_its_history(bars):
-    system = CoupledSystem(squeezed_joule_bars(bars))
+    system = make_system(squeezed_joule_bars(bars))
     system.reset({"temperature": 300.0})
-    with pytest.raises(NewtonConvergenceError, match="DIVERGED_MAX_IT") as caught:
-        solve_newton(system, max_it=2)
+    with pytest.raises(sc.NewtonConvergenceError, match="DIVERGED_MAX_IT") as caught:
+        sc.solve(system, max_it=2)
     assert len(caught.value.result.history) == 3  # iterates 0, 1 and 2
     assert "inner rounds" in str(caught.value)
 
 
 def test_inner_failure_names_the_corrector(bars):
-    system = CoupledSystem(expansion_problem(bars, 350.0))
+    system = make_system(expansion_problem(bars, 350.0))
     system.reset({"temperature": 300.0})
-    with pytest.raises(NewtonConvergenceError, match="method1 corrector"):
-        solve_newton(system, corrector="method1", max_rounds=5)
+    with pytest.raises(sc.NewtonConvergenceError, match="method1: no convergence"):
+        sc.solve(system, sc.Subdomains(sc.Method1(), max_rounds=5))
 
 
 @pytest.mark.parametrize(
@@ -204,7 +210,7 @@ def test_inner_failure_names_the_corrector(bars):
     [
         (Material(conductivity=-1.0), Contact(conductance=1.0), "conductivity = -1.0"),
         (Material(conductivity=float("nan")), Contact(conductance=1.0), "conductivity = nan"),
-        (Material(conductivity=1.0), Contact(conductance=0.0), "conductance = 0.0"),
+        (Material(conductivity=1.0), Contact(conductance=-1.0), "conductance = -1.0: must be >="),
         (Material(conductivity=1.0), Contact(), "needs 'conductance'"),
         (Material(conductivity=1.0, poisson=0.5), Contact(conductance=1.0), "poisson"),
         (
@@ -216,12 +222,12 @@ def test_inner_failure_names_the_corrector(bars):
 )
 def test_bad_data_is_refused_by_name(bars, material, contact, message):
     with pytest.raises(ValueError, match=message):
-        CoupledProblem(bars, {"plate_A": material, "plate_B": material}, {"contact": contact})
+        Problem(bars, {"plate_A": material, "plate_B": material}, {"contact": contact})
 
 
 def test_condition_for_a_missing_field_is_refused(bars):
     with pytest.raises(ValueError, match="'left': Potential needs the potential field"):
-        CoupledProblem(
+        Problem(
             bars,
             {"plate_A": Material(conductivity=1.0), "plate_B": Material(conductivity=1.0)},
             {"contact": Contact(conductance=1.0)},
@@ -267,7 +273,7 @@ def test_power_law_values(comm):
 @pytest.fixture(scope="module")
 def blocks3d(comm):
     """Two 0.5 × 0.2 × 0.2 m blocks in a row, tetrahedra of about 0.1 m."""
-    return load_scene(
+    return sc.load_scene(
         GEO / "blocks3d.geo",
         bodies=["block_A", "block_B"],
         interfaces=["contact"],
@@ -282,7 +288,7 @@ def test_thermal_expansion_in_3d(blocks3d, comm, temperature):
     steel = Material(
         conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
     )
-    problem = CoupledProblem(
+    problem = Problem(
         blocks3d,
         {"block_A": steel, "block_B": steel},
         {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=1e-4)},
@@ -295,12 +301,12 @@ def test_thermal_expansion_in_3d(blocks3d, comm, temperature):
             Displacement("bottom", 2, 0.0),
         ],
     )
-    system = CoupledSystem(problem)
-    assert system.channels["contact"] == [("temperature", None), ("displacement", 0)]
+    system = make_system(problem)
+    assert system.layers["contact"].channels == (("temperature", None), ("displacement", 0))
     states = {}
     for linear in ("subdomain", "monolithic"):
         system.reset({"temperature": 300.0})
-        solve_newton(system, linear=linear, rtol=1e-12)
+        sc.solve(system, LINEAR[linear](), rtol=1e-12)
         states[linear] = system.state()
     # both converged to rtol 1e-12: measured ≤ 1.3e-14 apart
     assert max(system.difference(states["subdomain"], states["monolithic"]).values()) < 1e-8
@@ -328,7 +334,7 @@ def test_every_field_in_3d_potential_and_current(blocks3d, comm):
         "block_A": Material(conductivity=10.0, electrical_conductivity=1e4, young=1e10),
         "block_B": Material(conductivity=50.0, electrical_conductivity=3e4, young=2e11),
     }
-    problem = CoupledProblem(
+    problem = Problem(
         blocks3d,
         materials,
         {"contact": Contact(conductance=2e3, electrical_conductance=5e4, normal=Penalty(1e12))},
@@ -343,14 +349,14 @@ def test_every_field_in_3d_potential_and_current(blocks3d, comm):
             Displacement("bottom", 2, 0.0),
         ],
     )
-    system = CoupledSystem(problem)
-    assert [f for f, _ in system.channels["contact"]] == [
+    system = make_system(problem)
+    assert [f for f, _ in system.layers["contact"].channels] == [
         "temperature",
         "potential",
         "displacement",
     ]
     system.reset({"temperature": 300.0})
-    solve_newton(system, rtol=1e-12)
+    sc.solve(system, rtol=1e-12)
     exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 0.5, 300.0, 320.0)
     potential = {"block_A": exact.potential_a, "block_B": exact.potential_b}
     # φ is linear, exact on tetrahedra: round-off only (measured 3e-16, current 4e-16)
@@ -362,7 +368,7 @@ def test_every_field_in_3d_potential_and_current(blocks3d, comm):
 
 def test_three_bodies_two_interfaces_match_the_monolithic_newton(comm):
     """A chain of three bodies: the middle one has two interfaces, corrected block by block."""
-    from subdomain_contact.cases import stack_scene
+    from verification.cases import stack_scene
 
     scene = stack_scene(3, 3, 2, comm=comm)
     h = laws.PowerLaw(scale=50.0, hardness=1e6, exponent=1.0, floor=5.0)
@@ -380,7 +386,7 @@ def test_three_bodies_two_interfaces_match_the_monolithic_newton(comm):
         )
         for i in range(2)
     }
-    problem = CoupledProblem(
+    problem = Problem(
         scene,
         materials,
         contacts,
@@ -391,15 +397,15 @@ def test_three_bodies_two_interfaces_match_the_monolithic_newton(comm):
             Potential("right", 0.0),
         ],
     )
-    system = CoupledSystem(problem)
+    system = make_system(problem)
     states, rounds = {}, {}
     for name, options in [
-        ("gmres", {"linear": "subdomain"}),  # the default with several interfaces per body
-        ("jacobi", {"linear": "subdomain", "krylov": False, "max_rounds": 300}),
-        ("monolithic", {"linear": "monolithic"}),
+        ("gmres", sc.Subdomains()),  # the default with several interfaces per body
+        ("jacobi", sc.Subdomains(krylov=False, max_rounds=300)),
+        ("monolithic", sc.Monolithic()),
     ]:
         system.reset()
-        result = solve_newton(system, rtol=1e-12, **options)
+        result = sc.solve(system, options, rtol=1e-12)
         states[name] = system.state()
         rounds[name] = [s.inner_rounds for s in result.history[1:]]
     for name in ("gmres", "jacobi"):

@@ -2,15 +2,16 @@
 
 import numpy as np
 import pytest
+from helpers import linear_solve, snapshot
 
 import subdomain_contact as sc
-from subdomain_contact.cases import two_plates
 from subdomain_contact.partitioned import (
     robin_robin_map,
     solve_dirichlet_neumann,
     solve_robin_robin,
 )
-from subdomain_contact.verification import relative_nodal_error
+from verification.cases import two_plates
+from verification.nodal import relative_nodal_error
 
 
 def error(result, reference):
@@ -47,7 +48,7 @@ def test_constant_relaxation_converges_at_small_h_and_stalls_at_large_h(plates):
 
 def test_iqn_ils_beats_aitken_when_the_data_vary_along_the_contact(plates):
     base = two_plates(plates, h=1e4).problem
-    cooled = sc.ThermalProblem(
+    cooled = sc.Problem(
         plates, base.materials, base.contacts, [*base.conditions, sc.Convection("top", 5.0, 2.0)]
     )
     # The Robin-Robin map is affine, x̃ = M x + c: its fixed point x* and ‖(I − M)⁻¹‖ from
@@ -66,29 +67,29 @@ def test_iqn_ils_beats_aitken_when_the_data_vary_along_the_contact(plates):
         assert run.converged
         bound = np.linalg.norm(inverse, 2) * np.linalg.norm(run.output - run.data)
         assert np.linalg.norm(run.data - exact) <= (1 + 1e-6) * bound
-    # x* is B's interface temperature of the same discrete problem: the series solve's
+    # x* is B's interface temperature of the same discrete problem: the subdomain solve's
     # (cond(I − M) eps ≈ 1e-12 apart; 1e-10 leaves 100 times that)
-    solver = sc.ThermalSubdomains(cooled)
-    T_b = solver.solve(rtol=1e-12).temperatures["plate_B"].x.array
-    block = solver.blocks["plate_B"]
-    assert np.abs(block.slaves["contact"].gather(T_b, 5, block.comm) - exact).max() <= 1e-10
+    system, _ = linear_solve(cooled, rtol=1e-12)
+    body = system.bodies["plate_B"]
+    on_b = body.slaves["contact"].gather(body.U.x.array, 5, body.comm)
+    assert np.abs(on_b - exact).max() <= 1e-10
     assert runs["iqn-ils"].iterations < runs["aitken"].iterations
 
 
 def test_robin_robin_refuses_more_than_two_bodies():
-    from subdomain_contact.cases import stack, stack_scene
+    from verification.cases import stack, stack_scene
 
     problem = stack(stack_scene(3, 2, 2), h=1.0)
-    with pytest.raises(ValueError, match="two bodies, one interface"):
+    with pytest.raises(ValueError, match="two bodies, one interface, heat alone"):
         solve_robin_robin(problem)
 
 
 def cooled(scene, h):
     base = two_plates(scene, h=h).problem
     extra = [*base.conditions, sc.Convection("top", 5.0, 2.0)]
-    problem = sc.ThermalProblem(scene, base.materials, base.contacts, extra)
-    series = sc.ThermalSubdomains(problem).solve(rtol=1e-12)
-    return problem, {n: T.x.array.copy() for n, T in series.temperatures.items()}
+    problem = sc.Problem(scene, base.materials, base.contacts, extra)
+    system, _ = linear_solve(problem, rtol=1e-12)
+    return problem, snapshot(system)[0]
 
 
 @pytest.mark.parametrize("acceleration", ["aitken", "iqn-ils"])
@@ -116,7 +117,7 @@ def test_dirichlet_neumann_stays_exact_at_a_stiff_contact_where_robin_robin_is_r
 
 
 def test_a_diverging_coupling_stops_and_says_so():
-    from subdomain_contact.cases import two_plates_scene
+    from verification.cases import two_plates_scene
 
     scene = two_plates_scene(4, 4)
     problem = two_plates(scene, h=1e3, k_b=10.0).problem  # DN unrelaxed-ish: B stiffer than A

@@ -2,60 +2,63 @@
 
 import numpy as np
 import pytest
+from helpers import linear_solve, monolithic, snapshot
 
 import subdomain_contact as sc
-from subdomain_contact.cases import two_plates
-from subdomain_contact.verification import relative_nodal_error
-
-
-def errors(solver, result, case):
-    spaces = {n: b.V for n, b in solver.blocks.items()}
-    values = {n: T.x.array for n, T in result.temperatures.items()}
-    return relative_nodal_error(spaces, values, case.exact_by_body)
+from verification.analytic import TwoPlates
+from verification.cases import TwoPlatesCase, two_plates, two_plates_scene
+from verification.nodal import error_against, field_values, relative_nodal_error
 
 
 @pytest.mark.parametrize("h", [10.0**e for e in range(-8, 13, 2)])
 @pytest.mark.parametrize("contrast", [1e-6, 1.0, 1e6])
-def test_series_corrector_is_nodal_exact_at_every_h(plates, h, contrast):
+def test_exact_corrector_is_nodal_exact_at_every_h(plates, h, contrast):
     """Two rounds (one correction and the check) and 1e-9 against the exact solution."""
     case = two_plates(plates, h=h, k_a=1.0, k_b=contrast, source_a=3.0, source_b=-2.0 * contrast)
-    solver = sc.ThermalSubdomains(case.problem, sc.Series())
-    result = solver.solve(rtol=1e-10)
-    # the series corrector is exact for a linear interface: one correction, then the check
+    system, result = linear_solve(case.problem, sc.Exact(), rtol=1e-10)
+    # the exact corrector is exact for a linear interface: one correction, then the check
     assert result.rounds <= 2
     # P1 is nodally exact in 1D, and the one correction leaves round-off only: measured
-    # ≤ 5.4e-14 over the 33 cases, serial and on 2 ranks; 1e-9 is 2e4 times that
-    assert errors(solver, result, case) <= 1e-9
+    # ≤ 5.4e-14 over the 33 cases, serially and on 2 ranks; 1e-9 is 2e4 times that
+    assert error_against(system, case.exact_by_body) <= 1e-9
+
+
+def test_newton_solves_a_linear_problem_in_one_step(plates):
+    """sc.solve on a linear problem: one Newton step whose inner solve goes to rtol."""
+    case = two_plates(plates, h=1e3, k_a=2.0, source_a=3.0)
+    with sc.System(case.problem) as system:
+        assert system.is_linear and system.symmetric
+        result = sc.solve(system, rtol=1e-10)
+        assert result.iterations == 1 and result.rounds == 2
+        assert error_against(system, case.exact_by_body) <= 1e-9  # as above: round-off
 
 
 @pytest.mark.parametrize("h", [1e-6, 1e-2, 1.0, 1e2, 1e6])
 def test_subdomain_equals_monolithic(plates_fine, h):
     """Same discrete system: subdomain and merged-master solves agree (triangles)."""
     case = two_plates(plates_fine, h=h, k_a=2.0, k_b=50.0)
-    solver = sc.ThermalSubdomains(case.problem)
-    result = solver.solve(rtol=1e-12)
-    reference = sc.solve_monolithic(solver.blocks)
-    spaces = {n: b.V for n, b in solver.blocks.items()}
-    values = {n: T.x.array for n, T in result.temperatures.items()}
-    # Both are direct solves of the same system (the series correction is exact): they
+    system, _ = linear_solve(case.problem, rtol=1e-12)
+    values, masters = snapshot(system)
+    monolithic(system)
+    spaces, reference = field_values(system)
+    # Both are direct solves of the same system (the exact correction is exact): they
     # differ by round-off, cond·eps, which grows with h (measured 1.6e-13 at h = 1e6,
     # ≤ 5e-15 below). 1e-9 leaves 6000 times the worst.
-    assert relative_nodal_error(spaces, values, reference.temperatures) <= 1e-9
-    assert np.abs(result.masters["contact"] - reference.masters["contact"]).max() <= 1e-9
+    assert relative_nodal_error(spaces, values, reference) <= 1e-9
+    assert np.abs(masters["contact"] - system.masters["contact"]).max() <= 1e-9
     # the merged solve loses digits as h grows (1.6e-13 at 1e6, measured; METHOD.md notes
     # 1e-4 at h = 1e12): 1e-8 bounds it up to h = 1e6 with a margin of 6e4
-    assert relative_nodal_error(spaces, reference.temperatures, case.exact_by_body) <= 1e-8
+    assert error_against(system, case.exact_by_body) <= 1e-8
 
 
 def test_monolithic_reference_is_exact_at_moderate_h(plates):
     case = two_plates(plates, h=10.0, k_a=1.0, k_b=4.0, source_b=5.0)
-    solver = sc.ThermalSubdomains(case.problem)
-    reference = sc.solve_monolithic(solver.blocks)
-    spaces = {n: b.V for n, b in solver.blocks.items()}
-    # nodally exact P1 and a well-conditioned direct solve: measured 5.6e-16, 1e-12 leaves
-    # 1800 times that for other BLAS kernels
-    assert relative_nodal_error(spaces, reference.temperatures, case.exact_by_body) <= 1e-12
-    assert reference.num_dofs == 2 * 25 + 5  # two plates of 5 × 5 nodes, 5 masters
+    with sc.System(case.problem) as system:
+        monolithic(system)
+        # nodally exact P1 and a well-conditioned direct solve: measured 5.6e-16, 1e-12
+        # leaves 1800 times that for other BLAS kernels
+        assert error_against(system, case.exact_by_body) <= 1e-12
+        assert sum(system.num_dofs().values()) == 2 * 25 + 5  # two plates of 5 × 5, 5 masters
 
 
 @pytest.mark.parametrize(("layers", "X"), [(2, 1.0), (4, 1.5), (8, 1.75), (16, 1.875)])
@@ -64,24 +67,23 @@ def test_paper_table_1(comm, layers, X):
     n = int(np.log2(layers)) - 1
     assert sc.paper_factor(n, layers=1) == X == 2 - 2 / layers
     h = 1e6
-    case = two_plates(sc.cases.two_plates_scene(layers, layers, comm=comm), h=h)
-    solver = sc.ThermalSubdomains(case.problem, sc.PartialCondensation(layers=1, factor=X))
-    result = solver.solve(rtol=1e-6)
+    case = two_plates(two_plates_scene(layers, layers, comm=comm), h=h)
+    corrector = sc.PartialCondensation(layers=1, factor=X)
+    system, result = linear_solve(case.problem, corrector, rtol=1e-6, krylov=False)
     assert result.rounds == 2
     # With X exact for the uniform mode (the only one here), the corrector is method 2's
     # K̂: one correction divides the master error by 1 + h̄ (k/L = 1). The masters start at
     # 0 against T_m ≈ 1/2 (range 1): the error after it is 0.5/(1 + 2h) = 2.5e-7 (measured
     # to 2e-5 relative on all four meshes; 1e-3 leaves 50 times that).
-    assert errors(solver, result, case) == pytest.approx(0.5 / (1 + 2 * h), rel=1e-3)
+    assert error_against(system, case.exact_by_body) == pytest.approx(0.5 / (1 + 2 * h), rel=1e-3)
 
 
 @pytest.mark.parametrize("h", [0.01, 0.1, 1.0, 3.0])
 def test_method1_contracts_by_hbar_over_one_plus_hbar(plates, h):
     """In units of the plate's own stiffness k/L = 1 W/(m^2 K): rate h̄/(1 + h̄)."""
     case = two_plates(plates, h=h)
-    solver = sc.ThermalSubdomains(case.problem, sc.Method1())
     with pytest.raises(sc.SubdomainConvergenceError) as failure:
-        solver.solve(rtol=1e-300, max_rounds=4)
+        linear_solve(case.problem, sc.Method1(), rtol=1e-300, max_rounds=4)
     history = failure.value.result.history
     hbar = 2 * h
     # uniform data: the master error is the uniform mode alone, and the rate is exact for
@@ -93,9 +95,8 @@ def test_method1_contracts_by_hbar_over_one_plus_hbar(plates, h):
 @pytest.mark.parametrize("h", [0.3, 1.0, 10.0, 1e3])
 def test_method2_contracts_by_one_over_one_plus_hbar(plates, h):
     case = two_plates(plates, h=h)
-    solver = sc.ThermalSubdomains(case.problem, sc.Method2())
     with pytest.raises(sc.SubdomainConvergenceError) as failure:
-        solver.solve(rtol=1e-300, max_rounds=3)
+        linear_solve(case.problem, sc.Method2(), rtol=1e-300, max_rounds=3)
     history = failure.value.result.history
     # exact for the uniform mode, as for method 1 (measured ≤ 8e-11 relative at h = 1e3,
     # where the residual ratio is 5e-4; 1e-5 leaves 1e5)
@@ -107,60 +108,51 @@ def test_convection_and_flux_conditions(plates):
     k_a, k_b, h, hc, ambient, q = 2.0, 0.5, 3.0, 4.0, 300.0, 50.0
     t_right = ambient + q / hc
     t_left = t_right + q * (1 / k_a + 1 / h + 1 / k_b)
-    exact = sc.TwoPlates(1.0, 1.0, k_a, k_b, h, t_left, t_right)
-    problem = sc.ThermalProblem(
+    exact = TwoPlates(1.0, 1.0, k_a, k_b, h, t_left, t_right)
+    problem = sc.Problem(
         plates,
-        {"plate_A": sc.ThermalMaterial(k_a), "plate_B": sc.ThermalMaterial(k_b)},
-        {"contact": sc.ThermalContact(h)},
+        {"plate_A": sc.Material(conductivity=k_a), "plate_B": sc.Material(conductivity=k_b)},
+        {"contact": sc.Contact(conductance=h)},
         [sc.HeatFlux("left", q), sc.Convection("right", hc, ambient), sc.HeatFlux("top", 0.0)],
     )
-    solver = sc.ThermalSubdomains(problem)
-    result = solver.solve()
-    case = sc.cases.TwoPlatesCase(problem, exact)
-    assert result.rounds <= 2  # the series corrector: one correction, then the check
+    system, result = linear_solve(problem)
+    assert result.rounds <= 2  # the exact corrector: one correction, then the check
     # nodally exact, round-off only: measured 2.8e-14, 1e-10 leaves 3600 times that
-    assert errors(solver, result, case) <= 1e-10
+    assert error_against(system, TwoPlatesCase(problem, exact).exact_by_body) <= 1e-10
 
 
-def test_floating_bodies_with_series_corrector(plates):
-    """No temperature condition at all: K̂ is singular, the series corrector still works."""
-    problem = sc.ThermalProblem(
-        plates,
-        {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
-        {"contact": sc.ThermalContact(5.0)},
-        [sc.HeatFlux("left", 10.0), sc.Convection("right", 2.0, 20.0)],
+def test_floating_bodies_with_exact_corrector(plates):
+    """No temperature condition at all: K̂ is singular, the exact corrector still works."""
+    materials = {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)}
+    contacts = {"contact": sc.Contact(conductance=5.0)}
+    problem = sc.Problem(
+        plates, materials, contacts, [sc.HeatFlux("left", 10.0), sc.Convection("right", 2.0, 20.0)]
     )
-    result = sc.ThermalSubdomains(problem).solve()
-    assert result.rounds <= 2  # the series corrector: one correction, then the check
+    _, result = linear_solve(problem, krylov=False)
+    assert result.rounds <= 2  # the exact corrector: one correction, then the check
     # nothing fixes the level at all: refused before any solver sees a singular matrix
     with pytest.raises(ValueError, match="defined only up to a constant"):
-        sc.ThermalProblem(
-            plates,
-            problem.materials,
-            problem.contacts,
-            [sc.HeatFlux("left", 10.0), sc.HeatFlux("right", -10.0)],
+        sc.Problem(
+            plates, materials, contacts, [sc.HeatFlux("left", 10.0), sc.HeatFlux("right", -1.0)]
         )
 
 
 def test_an_insulating_contact_separates_the_plates(plates):
     case = two_plates(plates, h=0.0, k_a=2.0, source_a=3.0)
-    solver = sc.ThermalSubdomains(case.problem)
-    result = solver.solve()
-    spaces = {n: b.V for n, b in solver.blocks.items()}
-    values = {n: T.x.array for n, T in result.temperatures.items()}
+    system, result = linear_solve(case.problem)
     assert result.rounds == 1  # nothing crosses: the first round is the answer
     # each plate alone, nodally exact: round-off only (measured 3.8e-14; 1e-12 leaves 26
     # times that, as in every direct solve of these plates)
-    assert relative_nodal_error(spaces, values, case.exact_by_body) < 1e-12
-    reference = sc.solve_monolithic(solver.blocks)
-    assert relative_nodal_error(spaces, reference.temperatures, case.exact_by_body) < 1e-12
+    assert error_against(system, case.exact_by_body) < 1e-12
+    monolithic(system)
+    assert error_against(system, case.exact_by_body) < 1e-12
 
 
 def test_a_scene_that_nothing_holds_is_refused(plates):
     with pytest.raises(ValueError, match=r"\['plate_B'\] have no temperature"):
-        sc.ThermalProblem(
+        sc.Problem(
             plates,
-            {"plate_A": sc.ThermalMaterial(1.0), "plate_B": sc.ThermalMaterial(1.0)},
-            {"contact": sc.ThermalContact(0.0)},  # insulating: B is on its own
+            {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)},
+            {"contact": sc.Contact(conductance=0.0)},  # insulating: B is on its own
             [sc.Temperature("left", 1.0), sc.HeatFlux("right", 2.0)],
         )

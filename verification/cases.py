@@ -11,24 +11,19 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from subdomain_contact import laws
-from subdomain_contact.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
-from subdomain_contact.geometry import Scene, load_scene
-from subdomain_contact.multiphysics import (
+from subdomain_contact.physics import (
     Contact,
-    CoupledProblem,
+    Convection,
     Displacement,
     ExponentialClosure,
     Material,
     Penalty,
     Potential,
-)
-from subdomain_contact.thermal import (
-    Convection,
+    Problem,
     Temperature,
-    ThermalContact,
-    ThermalMaterial,
-    ThermalProblem,
 )
+from subdomain_contact.scene import Scene, load_scene
+from verification.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
 
 __all__ = [
     "GEO",
@@ -45,7 +40,7 @@ __all__ = [
     "two_plates_scene",
 ]
 
-#: The project's geometry folder.
+#: The repository's geometry folder.
 GEO = Path(__file__).resolve().parent.parent / "geo"
 
 
@@ -53,7 +48,7 @@ GEO = Path(__file__).resolve().parent.parent / "geo"
 class TwoPlatesCase:
     """The two-plate problem of the paper's figure 2 and its closed-form solution."""
 
-    problem: ThermalProblem
+    problem: Problem
     exact: TwoPlates
 
     @property
@@ -118,10 +113,13 @@ def two_plates(
         t_left: Temperature [K] at x = 0.
         t_right: Temperature [K] at x = 2.
     """
-    problem = ThermalProblem(
+    problem = Problem(
         scene,
-        {"plate_A": ThermalMaterial(k_a, source_a), "plate_B": ThermalMaterial(k_b, source_b)},
-        {"contact": ThermalContact(h)},
+        {
+            "plate_A": Material(conductivity=k_a, heat_source=source_a),
+            "plate_B": Material(conductivity=k_b, heat_source=source_b),
+        },
+        {"contact": Contact(conductance=h)},
         [Temperature("left", t_left), Temperature("right", t_right)],
     )
     exact = TwoPlates(1.0, 1.0, k_a, k_b, h, t_left, t_right, source_a, source_b)
@@ -161,21 +159,21 @@ def blocks3d_scene(
     )
 
 
-def heated_blocks(scene: Scene, *, h: float = 1e3) -> ThermalProblem:
+def heated_blocks(scene: Scene, *, h: float = 1e3) -> Problem:
     """The 3D thermal case: 1 K on the left end, cooled on the right end and on the front.
 
     Conductivities 1 and 10 W/(m K), contact conductance ``h`` [W/(m^2 K)]; the front
     convection (5 W/(m^2 K) to 0.5 K) makes the temperature vary over the contact face.
     """
-    return ThermalProblem(
+    return Problem(
         scene,
-        {"block_A": ThermalMaterial(1.0), "block_B": ThermalMaterial(10.0)},
-        {"contact": ThermalContact(h)},
+        {"block_A": Material(conductivity=1.0), "block_B": Material(conductivity=10.0)},
+        {"contact": Contact(conductance=h)},
         [Temperature("left", 1.0), Convection("right", 20.0, 0.0), Convection("front", 5.0, 0.5)],
     )
 
 
-def stack(scene: Scene, *, h: float, cooled: bool = True) -> ThermalProblem:
+def stack(scene: Scene, *, h: float, cooled: bool = True) -> Problem:
     """The chain held at 1 K on its left end, cooled by convection on its right end.
 
     Conductivities cycle through 1, 10 and 0.1 W/(m K) and every other body has a source of
@@ -185,30 +183,37 @@ def stack(scene: Scene, *, h: float, cooled: bool = True) -> ThermalProblem:
     """
     n = len(scene.bodies)
     materials = {
-        f"body_{i}": ThermalMaterial([1.0, 10.0, 0.1][i % 3], float(i % 2)) for i in range(n)
+        f"body_{i}": Material(conductivity=[1.0, 10.0, 0.1][i % 3], heat_source=float(i % 2))
+        for i in range(n)
     }
     conditions = [Temperature("left", 1.0), Convection("right", 2.0, 0.0)]
     if cooled:
         conditions.append(Convection("top", 0.5, 0.3))
-    contacts = {f"contact_{i}": ThermalContact(h) for i in range(n - 1)}
-    return ThermalProblem(scene, materials, contacts, conditions)
+    contacts = {f"contact_{i}": Contact(conductance=h) for i in range(n - 1)}
+    return Problem(scene, materials, contacts, conditions)
 
 
-def bars_scene(layers: int = 4, rows: int = 2, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+def bars_scene(
+    layers: int = 4,
+    rows: int = 2,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
+) -> Scene:
     """``geo/two_plates.geo`` as two bars of 0.5 m × 0.1 m (``layers`` × ``rows`` quads each)."""
-    return two_plates_scene(layers, rows, length=0.5, height=0.1, comm=comm)
+    return two_plates_scene(layers, rows, length=0.5, height=0.1, comm=comm, placement=placement)
 
 
 def joule_bars(
     scene: Scene, *, voltage: float = 0.5, h: float = 2e3, g: float = 5e4
-) -> tuple[CoupledProblem, JouleBars]:
+) -> tuple[Problem, JouleBars]:
     """Constant laws, heat and current through the bars of :func:`bars_scene`, and the closed form.
 
     Bar A: k = 10 W/(m K), σ = 1e4 S/m; bar B: k = 50, σ = 3e4; contact conductances ``h``
     [W/(m² K)] and ``g`` [S/m²]; T = 300 K at x = 0 and 320 K at x = 1 m; ``voltage`` [V]
     across.
     """
-    problem = CoupledProblem(
+    problem = Problem(
         scene,
         {
             "plate_A": Material(conductivity=10.0, electrical_conductivity=1e4),
@@ -227,7 +232,7 @@ def joule_bars(
 
 def steel_blocks_between_walls(
     scene: Scene, temperature: float, *, gap: float = 1e-4
-) -> tuple[CoupledProblem, BlocksBetweenWalls]:
+) -> tuple[Problem, BlocksBetweenWalls]:
     """The bars of :func:`bars_scene` as steel blocks between fixed walls, heated uniformly.
 
     Both walls at ``temperature`` [K] (reference 300 K), u_x = 0 at the walls, rollers at the
@@ -237,7 +242,7 @@ def steel_blocks_between_walls(
     steel = Material(
         conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
     )
-    problem = CoupledProblem(
+    problem = Problem(
         scene,
         {"plate_A": steel, "plate_B": steel},
         {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
@@ -253,7 +258,7 @@ def steel_blocks_between_walls(
     return problem, exact
 
 
-def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> CoupledProblem:
+def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
     """Every field coupled: ``voltage`` across the bars, squeezed 20 µm between walls at 300 K.
 
     Bar A is carbon-like (k(T) a law, σ(T) a table, both growing with T), bar B steel-like (σ(T)
@@ -286,7 +291,7 @@ def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> CoupledProblem
         ),
         normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
     )
-    return CoupledProblem(
+    return Problem(
         scene,
         {"plate_A": carbon, "plate_B": steel},
         {"contact": contact},

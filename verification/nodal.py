@@ -10,7 +10,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-__all__ = ["NodalReference", "relative_nodal_error"]
+__all__ = ["NodalReference", "error_against", "field_values", "relative_nodal_error"]
 
 Values = npt.NDArray[np.float64]
 
@@ -84,3 +84,25 @@ class NodalReference:
                 raise ValueError(f"body '{name}': the reference was computed on another mesh")
             out[name] = self.values[name][index]
         return out
+
+
+def field_values(
+    system, field: str = "temperature", component: int | None = None
+) -> tuple[dict[str, dolfinx.fem.FunctionSpace], dict[str, Values]]:
+    """Spaces and values (copies) of one scalar field (or component) of a system's bodies."""
+    spaces, values = {}, {}
+    for name, body in system.bodies.items():
+        V, parent_of = body.forms.collapsed(field, component)
+        spaces[name], values[name] = V, body.U.x.array[parent_of].copy()
+    return spaces, values
+
+
+def error_against(
+    system,
+    reference: Mapping[str, Callable[[Values], Values] | Values],
+    field: str = "temperature",
+    component: int | None = None,
+) -> float:
+    """:func:`relative_nodal_error` of a system's field against a reference (collective)."""
+    spaces, values = field_values(system, field, component)
+    return relative_nodal_error(spaces, values, reference, comm=system.comm)

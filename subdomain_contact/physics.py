@@ -1,27 +1,33 @@
-"""Thermo-electro-mechanical bodies and contacts as UFL residual forms.
+"""Materials, contact laws and boundary conditions of a scene, and each body's UFL residuals.
 
-Fields per body (only those the materials ask for are built): temperature T [K], electric
-potential φ [V], displacement u [m] (plane strain in 2D). Bulk couplings: Joule heating
-σ(T)|∇φ|², conductivities k(T) and σ(T), thermal strain α (T − T_ref).
+Fields per body, only those the materials ask for: temperature T [K], electric potential φ
+[V], displacement u [m] (plane strain in 2D). A thermal problem is the one-field case. Bulk
+couplings: Joule heating σ(T)|∇φ|², conductivities k(T) and σ(T), thermal strain α (T − T_ref).
 
 Each contact interface k carries master copies of the fields. On body α they are the
-Function ``masters[k]`` *of the body's own space*: only its slave DOFs on Γ_k matter, and
-since both meshes are conforming P1 there, its trace on Γ_k is the master field. The
-half-link of body α at Γ_k (METHOD.md §2), with n the body's outward normal:
+Function ``masters[k]`` *of the body's own space*: only its slave DOFs on Γ_k matter, and since
+both meshes are conforming P1 there, its trace on Γ_k is the master field. The half-link of
+body α at Γ_k (METHOD.md §2), with n the body's outward normal and the jump ``j = U − U_m``:
 
-- thermal flux h̄ (T − T_m), h̄ = 2 h(p, T_m);
-- current ḡ (φ − φ_m), ḡ = 2 g(p, T_m), and the Joule heat ḡ (φ − φ_m)² on the slave side;
-- normal pressure p = P(⟨2δ⟩), δ = (u − u_m)·n − gap/2 (unilateral, P the closure law of the
-  whole contact); tangential traction k̄_t (u − u_m)_t when stuck, none when free.
+- thermal flux h̄ j_T, h̄ = 2 h(p, T_m);
+- current ḡ j_φ, ḡ = 2 g(p, T_m), and the Joule heat ḡ j_φ² deposited on the slave side;
+- normal pressure p = P(⟨2 j_u·n − gap⟩) (unilateral, P the closure law of the whole contact);
+  tangential traction 2 k_n j_t when stuck, none when free.
 
-Residuals are internal minus external. The body residual holds the half-links with the body's
-test function; the master residual of Γ_k holds minus the same fluxes (Joule heat excluded)
-with the master test function, which on body α is the test function at the slave DOFs.
+Residuals are internal minus external. The body residual holds the half-links tested with the
+body's test function; the master residual of Γ_k holds minus the same fluxes (Joule heat
+excluded), tested with the master test function, which on body α is the test function at the
+slave DOFs. The two differ by the Joule heat the half-link deposits on the body
+(``remainders``), which is small: the master residual can therefore be taken from the body's own
+equation without subtracting two h̄-sized numbers (:mod:`subdomain_contact.body`).
+
+Numbers in materials, contacts and conditions become ``dolfinx.fem.Constant`` coefficients, so
+that a sweep over them compiles each form once.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import basix.ufl
@@ -30,29 +36,34 @@ import numpy as np
 import numpy.typing as npt
 import ufl
 
-from subdomain_contact.geometry import Body, Scene
-from subdomain_contact.laws import Law, as_law, check_finite
-from subdomain_contact.thermal import Convection, HeatFlux, Temperature
+from subdomain_contact.laws import Law, check_finite
+from subdomain_contact.scene import Body, Scene
 
 __all__ = [
     "FIELDS",
-    "BodyPhysics",
+    "BodyForms",
+    "Condition",
     "Contact",
-    "CoupledProblem",
+    "Convection",
     "CurrentDensity",
     "Displacement",
     "ExponentialClosure",
+    "HeatFlux",
     "Material",
     "Penalty",
     "Potential",
-    "body_physics",
+    "Problem",
+    "Temperature",
+    "body_forms",
 ]
 
 #: Every field a body can carry, in the order of its mixed space.
 FIELDS = ("temperature", "potential", "displacement")
 
+Expr = ufl.core.expr.Expr
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, kw_only=True)
 class Material:
     """A body's material; a field exists where its property is given.
 
@@ -62,7 +73,8 @@ class Material:
         young: Young's modulus E [Pa].
         poisson: Poisson's ratio ν.
         expansion: Linear thermal expansion α [1/K].
-        reference_temperature: Temperature [K] of zero thermal strain.
+        reference_temperature: Temperature [K] of zero thermal strain; required with
+            ``expansion``.
         heat_source: Volumetric heat source [W/m^3] (besides Joule heat).
     """
 
@@ -71,7 +83,7 @@ class Material:
     young: float | None = None
     poisson: float = 0.3
     expansion: float = 0.0
-    reference_temperature: float = 0.0
+    reference_temperature: float | None = None
     heat_source: float = 0.0
 
     def fields(self) -> tuple[str, ...]:
@@ -86,7 +98,7 @@ class Penalty:
 
     stiffness: float
 
-    def __call__(self, closure: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+    def __call__(self, closure: Expr) -> Expr:
         """Pressure [Pa] at closure δ ≥ 0 [m]."""
         return self.stiffness * closure
 
@@ -103,7 +115,7 @@ class ExponentialClosure:
     stiffness: float
     closure: float
 
-    def __call__(self, closure: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+    def __call__(self, closure: Expr) -> Expr:
         """Pressure [Pa] at closure δ ≥ 0 [m]."""
         return self.stiffness * self.closure * (ufl.exp(closure / self.closure) - 1.0)
 
@@ -111,13 +123,13 @@ class ExponentialClosure:
 NormalLaw = Penalty | ExponentialClosure
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Contact:
     """The laws of one contact interface (of the whole contact, never the half-link's 2×).
 
     Attributes:
-        conductance: Thermal conductance h(p, T) [W/(m^2 K)].
-        electrical_conductance: Electrical conductance g(p, T) [S/m^2].
+        conductance: Thermal conductance h(p, T) [W/(m^2 K)]; 0: an insulating contact.
+        electrical_conductance: Electrical conductance g(p, T) [S/m^2]; 0: insulating.
         normal: Pressure–closure law; unilateral (no tension).
         tangential: ``"free"`` (no friction) or ``"stuck"`` (penalised slip, with the normal
             law's initial stiffness).
@@ -136,6 +148,31 @@ class Contact:
     pressure: float = 0.0
     temperature: float = 0.0
     open_stiffness: float = 1e-9
+
+
+@dataclass(frozen=True)
+class Temperature:
+    """Dirichlet condition: temperature [K] on a boundary group."""
+
+    boundary: str
+    value: float
+
+
+@dataclass(frozen=True)
+class HeatFlux:
+    """Neumann condition: heat flux [W/m^2] *into* the body through a boundary group."""
+
+    boundary: str
+    value: float
+
+
+@dataclass(frozen=True)
+class Convection:
+    """Robin condition q = coefficient (ambient − T): coefficient [W/(m^2 K)], ambient [K]."""
+
+    boundary: str
+    coefficient: float
+    ambient: float
 
 
 @dataclass(frozen=True)
@@ -164,7 +201,7 @@ class Displacement:
 
 
 Condition = Temperature | HeatFlux | Convection | Potential | CurrentDensity | Displacement
-_FIELD_OF = {
+FIELD_OF: Mapping[type, str] = {
     Temperature: "temperature",
     HeatFlux: "temperature",
     Convection: "temperature",
@@ -172,17 +209,26 @@ _FIELD_OF = {
     CurrentDensity: "potential",
     Displacement: "displacement",
 }
+#: The contact law that couples each field across an interface.
+_LAW_OF = {"temperature": "conductance", "potential": "electrical_conductance"}
 
 
 @dataclass(frozen=True)
-class CoupledProblem:
-    """A scene with materials, contact laws and boundary conditions, for every field.
+class Problem:
+    """A scene with materials, contact laws and boundary conditions, for every field it needs.
 
     Attributes:
         scene: Bodies and interfaces.
-        materials: Body name -> material; every body must give the same fields.
+        materials: Body name -> material; every body gives the same fields.
         contacts: Interface name -> contact laws (one per field of the scene).
-        conditions: Boundary conditions by boundary-group name.
+        conditions: Boundary conditions by boundary-group name; a group that spans several
+            bodies applies to each of them.
+
+    Raises:
+        ValueError: A missing or unknown entry, a coefficient that is not finite or not
+            positive, a condition on a field no material defines, or a body whose temperature
+            or potential nothing fixes (through conducting contacts included); the message
+            names the body, interface or boundary.
     """
 
     scene: Scene
@@ -208,14 +254,24 @@ class CoupledProblem:
         for name, c in self.contacts.items():
             self._check_contact(name, c)
         self._check_conditions()
+        for f in ("temperature", "potential"):
+            if f in self.fields:
+                self._check_anchored(f)
 
     def _check_material(self, name: str, m: Material) -> None:
         for attr in ("conductivity", "electrical_conductivity", "young"):
             value = getattr(m, attr)
             if value is not None and not callable(value):
                 check_finite(value, f"body '{name}': {attr}", positive=True)
-        for attr in ("expansion", "reference_temperature", "heat_source"):
+        for attr in ("expansion", "heat_source"):
             check_finite(getattr(m, attr), f"body '{name}': {attr}")
+        if m.reference_temperature is not None:
+            check_finite(m.reference_temperature, f"body '{name}': reference_temperature")
+        elif m.expansion != 0 and m.young is not None:
+            raise ValueError(
+                f"body '{name}': expansion = {m.expansion} needs reference_temperature, the "
+                "temperature [K] of zero thermal strain (for cast parts, their solidus)"
+            )
         if not -1.0 < m.poisson < 0.5:
             raise ValueError(f"body '{name}': poisson = {m.poisson}: must lie in (-1, 0.5)")
 
@@ -231,7 +287,10 @@ class CoupledProblem:
                 state = "needs" if f in self.fields else "has no field for"
                 raise ValueError(f"interface '{name}': the scene {state} '{attr}' ({f})")
             if isinstance(value, float | int):
-                check_finite(value, f"interface '{name}': {attr}", positive=True)
+                what = f"interface '{name}': {attr}"
+                check_finite(value, what)
+                if value < 0:
+                    raise ValueError(f"{what} = {value!r}: must be >= 0 (0: insulating)")
         if c.normal is not None:
             check_finite(c.normal.stiffness, f"interface '{name}': normal stiffness", positive=True)
         if c.tangential not in ("free", "stuck"):
@@ -244,28 +303,63 @@ class CoupledProblem:
         source = self.scene.source
         every = set().union(*(b.boundaries for b in self.scene.bodies.values()))
         every -= set(self.scene.interfaces)
+        dim = next(iter(self.scene.bodies.values())).mesh.geometry.dim
         for bc in self.conditions:
             if bc.boundary not in every:
                 raise ValueError(
                     f"{source}: no boundary group named '{bc.boundary}' on any body; "
                     f"boundary groups: {sorted(every)}"
                 )
-            if _FIELD_OF[type(bc)] not in self.fields:
+            if FIELD_OF[type(bc)] not in self.fields:
                 raise ValueError(
                     f"boundary '{bc.boundary}': {type(bc).__name__} needs the "
-                    f"{_FIELD_OF[type(bc)]} field, which no material defines"
+                    f"{FIELD_OF[type(bc)]} field, which no material defines"
                 )
             for attr in ("value", "coefficient", "ambient"):
                 if hasattr(bc, attr):
                     check_finite(getattr(bc, attr), f"boundary '{bc.boundary}': {attr}")
-            if isinstance(bc, Displacement) and bc.component not in range(
-                self.scene.bodies[next(iter(self.scene.bodies))].mesh.geometry.dim
-            ):
+            if isinstance(bc, Convection) and bc.coefficient < 0:
+                raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
+            if isinstance(bc, Displacement) and bc.component not in range(dim):
                 raise ValueError(f"boundary '{bc.boundary}': no component {bc.component}")
+
+    def insulating(self, interface: str, field_name: str) -> bool:
+        """Whether the contact passes nothing of a scalar field (its law is the number 0)."""
+        law = getattr(self.contacts[interface], _LAW_OF.get(field_name, "normal"), None)
+        return isinstance(law, float | int) and law == 0
+
+    def _check_anchored(self, field_name: str) -> None:
+        """Refuse bodies whose temperature (or potential) nothing fixes, even through contacts.
+
+        A group of bodies joined by conducting contacts needs a Dirichlet (or, for heat, a
+        convection) condition somewhere: without one its level is defined only up to a
+        constant and every solver would return an arbitrary one.
+        """
+        scene = self.scene
+        anchors = {
+            bc.boundary
+            for bc in self.conditions
+            if (FIELD_OF[type(bc)] == field_name and isinstance(bc, Temperature | Potential))
+            or (isinstance(bc, Convection) and bc.coefficient > 0 and field_name == "temperature")
+        }
+        group = {name: {name} for name in scene.bodies}
+        for k, interface in scene.interfaces.items():
+            if not self.insulating(k, field_name):
+                merged = group[interface.bodies[0]] | group[interface.bodies[1]]
+                for name in merged:
+                    group[name] = merged
+        condition = "temperature or convection" if field_name == "temperature" else "potential"
+        for members in {frozenset(g) for g in group.values()}:
+            if not any(anchors & set(scene.bodies[n].boundaries) for n in members):
+                raise ValueError(
+                    f"{scene.source}: bodies {sorted(members)} have no {condition} condition "
+                    f"and no conducting contact leads to one: their {field_name} is defined "
+                    "only up to a constant"
+                )
 
 
 @dataclass
-class BodyPhysics:
+class BodyForms:
     """A body's fields, its master Functions and its residual forms.
 
     Attributes:
@@ -274,8 +368,12 @@ class BodyPhysics:
         fields: The fields, in the order of ``W``'s sub-spaces.
         U: The body's solution.
         masters: Interface name -> master values on the body's space (slave DOFs only).
-        residual: Body residual form (internal − external) [W, A, N by field].
-        master_residuals: Interface name -> master residual form on the body's space.
+        bulk: Residual of the volume and the boundary conditions of flux type [W, A, N].
+        links: Interface name -> residual of its half-link on the body's side.
+        fluxes: Interface name -> the half-link's fluxes tested with the body's test function:
+            the master residual of the interface is minus this form at the slave DOFs.
+        remainders: Interface name -> ``links − fluxes``, the Joule heat deposited on the
+            body's side, or None where the scene has no temperature and potential together.
         bcs: Dirichlet conditions.
         contact: Interface name -> the half-link's ``"pressure"`` [Pa], ``"current density"``
             [A/m^2] and ``"heat flux"`` [W/m^2] from the body into the master (UFL), where
@@ -289,10 +387,12 @@ class BodyPhysics:
     fields: tuple[str, ...]
     U: dolfinx.fem.Function
     masters: dict[str, dolfinx.fem.Function]
-    residual: ufl.Form
-    master_residuals: dict[str, ufl.Form]
+    bulk: ufl.Form
+    links: dict[str, ufl.Form]
+    fluxes: dict[str, ufl.Form]
+    remainders: dict[str, ufl.Form | None]
     bcs: list[dolfinx.fem.DirichletBC]
-    contact: dict[str, dict[str, ufl.core.expr.Expr]]
+    contact: dict[str, dict[str, Expr]]
     ds: ufl.Measure
     tags: dict[str, int]
 
@@ -313,7 +413,7 @@ class BodyPhysics:
         return collapsed, np.asarray(to_parent[0])
 
 
-def _split(w: ufl.core.expr.Expr, fields: tuple[str, ...]) -> dict[str, ufl.core.expr.Expr]:
+def _split(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:
     if len(fields) == 1:
         return {fields[0]: w}
     return dict(zip(fields, ufl.split(w), strict=True))
@@ -328,94 +428,120 @@ def _space(mesh: dolfinx.mesh.Mesh, fields: tuple[str, ...]) -> dolfinx.fem.Func
     return dolfinx.fem.functionspace(mesh, element)
 
 
-def body_physics(problem: CoupledProblem, body: Body) -> BodyPhysics:
+def _constant(mesh: dolfinx.mesh.Mesh) -> Callable[[float], dolfinx.fem.Constant]:
+    return lambda value: dolfinx.fem.Constant(mesh, dolfinx.default_scalar_type(value))
+
+
+def _law(value: float | Law, constant: Callable[[float], Expr]) -> Law:
+    """A law from a callable, or a constant law whose value is a form coefficient."""
+    if callable(value):
+        return value
+    c = constant(float(value))
+    return lambda p, T: c
+
+
+def body_forms(problem: Problem, body: Body) -> BodyForms:
     """Spaces, unknowns and residual forms of ``body`` in ``problem``."""
     mesh, fields = body.mesh, problem.fields
+    constant = _constant(mesh)
     W = _space(mesh, fields)
     U = dolfinx.fem.Function(W, name=body.name)
     interfaces = problem.scene.interfaces_of(body.name)
     masters = {i.name: dolfinx.fem.Function(W, name=f"master {i.name}") for i in interfaces}
     u, v = _split(U, fields), _split(ufl.TestFunction(W), fields)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=body.facet_tags)
-    residual = _bulk(problem.materials[body.name], u, v, mesh.geometry.dim)
-    for form in _neumann(problem, body, u, v, ds):
-        residual += form
-    master_residuals, contact = {}, {}
+    bulk = _bulk(problem.materials[body.name], u, v, mesh.geometry.dim, constant)
+    for form in _neumann(problem, body, u, v, ds, constant):
+        bulk += form
+    links, fluxes, remainders, contact = {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
     for i in interfaces:
-        um = _split(masters[i.name], fields)
-        fluxes, joule, contact[i.name] = _half_link(problem.contacts[i.name], u, um, v, n)
-        residual += (fluxes - joule) * ds(i.tag)
-        master_residuals[i.name] = -fluxes * ds(i.tag)
+        Um = masters[i.name]
+        jump = {f: u[f] - um for f, um in _split(Um, fields).items()}
+        flux, joule, contact[i.name] = _half_link(
+            problem.contacts[i.name], jump, _split(Um, fields), v, n, constant
+        )
+        links[i.name] = (flux if joule is None else flux - joule) * ds(i.tag)
+        fluxes[i.name] = flux * ds(i.tag)
+        remainders[i.name] = None if joule is None else -joule * ds(i.tag)
     bcs = _dirichlet(problem, body, W, fields)
     tags = {i.name: i.tag for i in interfaces}
-    return BodyPhysics(
-        body.name, W, fields, U, masters, residual, master_residuals, bcs, contact, ds, tags
+    return BodyForms(
+        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, bcs, contact, ds, tags
     )
 
 
-def _bulk(m: Material, u: dict, v: dict, dim: int) -> ufl.core.expr.Expr:
+def _bulk(m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], Expr]) -> ufl.Form:
     """Conduction, Joule heating and thermoelasticity in the volume [W, A, N]."""
-    T = u.get("temperature", ufl.as_ufl(m.reference_temperature))
+    reference = constant(m.reference_temperature or 0.0)
+    T = u.get("temperature", reference)
     zero = ufl.as_ufl(0.0)
     terms = []
     if "temperature" in u:
-        k = as_law(m.conductivity)(zero, T)
+        k = _law(m.conductivity, constant)(zero, T)
         terms.append(k * ufl.inner(ufl.grad(T), ufl.grad(v["temperature"])))
-        terms.append(-m.heat_source * v["temperature"])
+        if m.heat_source != 0:
+            terms.append(-constant(m.heat_source) * v["temperature"])
     if "potential" in u:
-        sigma = as_law(m.electrical_conductivity)(zero, T)
+        sigma = _law(m.electrical_conductivity, constant)(zero, T)
         phi = u["potential"]
         terms.append(sigma * ufl.inner(ufl.grad(phi), ufl.grad(v["potential"])))
         if "temperature" in u:
             joule = sigma * ufl.inner(ufl.grad(phi), ufl.grad(phi))
             terms.append(-joule * v["temperature"])
     if "displacement" in u:
-        E, nu = m.young, m.poisson
+        E, nu = constant(m.young), constant(m.poisson)
         lmbda, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
         strain = ufl.sym(ufl.grad(u["displacement"]))
-        thermal = (3 * lmbda + 2 * mu) * m.expansion * (T - m.reference_temperature)
         stress = lmbda * ufl.tr(strain) * ufl.Identity(dim) + 2 * mu * strain
-        stress -= thermal * ufl.Identity(dim)
+        if m.expansion != 0:
+            thermal = (3 * lmbda + 2 * mu) * constant(m.expansion) * (T - reference)
+            stress -= thermal * ufl.Identity(dim)
         terms.append(ufl.inner(stress, ufl.sym(ufl.grad(v["displacement"]))))
     return sum(terms[1:], terms[0]) * ufl.dx
 
 
 def _half_link(
-    c: Contact, u: dict, um: dict, v: dict, n: ufl.core.expr.Expr
-) -> tuple[ufl.core.expr.Expr, ufl.core.expr.Expr, dict[str, ufl.core.expr.Expr]]:
-    """Flux terms (tested with ``v``), slave-side Joule heat, and the half-link's fluxes."""
-    T_m = um.get("temperature", ufl.as_ufl(c.temperature))
-    pressure = ufl.as_ufl(c.pressure)
-    fluxes, joule = ufl.as_ufl(0.0), ufl.as_ufl(0.0)
-    if "displacement" in u:
-        jump = u["displacement"] - um["displacement"]
-        closure = 2.0 * ufl.dot(jump, n) - c.gap  # closure of the whole contact, per side
+    c: Contact, jump: dict, um: dict, v: dict, n: Expr, constant: Callable[[float], Expr]
+) -> tuple[Expr, Expr | None, dict[str, Expr]]:
+    """Flux terms (tested with ``v``), slave-side Joule heat (or None), the half-link's fluxes."""
+    T_m = um.get("temperature", constant(c.temperature))
+    pressure: Expr = constant(c.pressure)
+    fluxes: Expr = ufl.as_ufl(0.0)
+    joule: Expr | None = None
+    if "displacement" in jump:
+        j = jump["displacement"]
+        closure = 2.0 * ufl.dot(j, n) - constant(c.gap)  # of the whole contact, per side
         pressure = c.normal(ufl.max_value(closure, 0.0))
         # an open side (closure ≤ 0, the tie included) keeps a tiny stiffness
         stretch = ufl.conditional(ufl.le(closure, 0.0), closure, 0.0)
-        tension = c.open_stiffness * c.normal.stiffness * stretch
+        tension = constant(c.open_stiffness * c.normal.stiffness) * stretch
         fluxes += (pressure + tension) * ufl.dot(n, v["displacement"])
         if c.tangential == "stuck":
-            slip = jump - ufl.dot(jump, n) * n
-            fluxes += 2.0 * c.normal.stiffness * ufl.dot(slip, v["displacement"])
+            slip = j - ufl.dot(j, n) * n
+            fluxes += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
     out = {"pressure": pressure}
-    if "temperature" in u:
-        h_bar = 2.0 * as_law(c.conductance)(pressure, T_m)
-        out["heat flux"] = h_bar * (u["temperature"] - T_m)
+    if "temperature" in jump:
+        h_bar = 2.0 * _law(c.conductance, constant)(pressure, T_m)
+        out["heat flux"] = h_bar * jump["temperature"]
         fluxes += out["heat flux"] * v["temperature"]
-    if "potential" in u:
-        g_bar = 2.0 * as_law(c.electrical_conductance)(pressure, T_m)
-        drop = u["potential"] - um["potential"]
+    if "potential" in jump:
+        g_bar = 2.0 * _law(c.electrical_conductance, constant)(pressure, T_m)
+        drop = jump["potential"]
         out["current density"] = g_bar * drop
         fluxes += out["current density"] * v["potential"]
-        if "temperature" in u:
+        if "temperature" in jump:
             joule = g_bar * drop**2 * v["temperature"]
     return fluxes, joule, out
 
 
 def _neumann(
-    problem: CoupledProblem, body: Body, u: dict, v: dict, ds: ufl.Measure
+    problem: Problem,
+    body: Body,
+    u: dict,
+    v: dict,
+    ds: ufl.Measure,
+    constant: Callable[[float], Expr],
 ) -> list[ufl.Form]:
     """Boundary fluxes and convection [W, A]."""
     forms = []
@@ -424,17 +550,17 @@ def _neumann(
             continue
         tag = body.boundaries[bc.boundary]
         if isinstance(bc, HeatFlux):
-            forms.append(-bc.value * v["temperature"] * ds(tag))
+            forms.append(-constant(bc.value) * v["temperature"] * ds(tag))
         elif isinstance(bc, CurrentDensity):
-            forms.append(-bc.value * v["potential"] * ds(tag))
+            forms.append(-constant(bc.value) * v["potential"] * ds(tag))
         elif isinstance(bc, Convection):
-            T = u["temperature"]
-            forms.append(bc.coefficient * (T - bc.ambient) * v["temperature"] * ds(tag))
+            T, hc = u["temperature"], constant(bc.coefficient)
+            forms.append(hc * (T - constant(bc.ambient)) * v["temperature"] * ds(tag))
     return forms
 
 
 def _dirichlet(
-    problem: CoupledProblem, body: Body, W: dolfinx.fem.FunctionSpace, fields: tuple[str, ...]
+    problem: Problem, body: Body, W: dolfinx.fem.FunctionSpace, fields: tuple[str, ...]
 ) -> list[dolfinx.fem.DirichletBC]:
     bcs = []
     fdim = body.mesh.topology.dim - 1
@@ -443,7 +569,7 @@ def _dirichlet(
             bc, Temperature | Potential | Displacement
         ):
             continue
-        V = W if len(fields) == 1 else W.sub(fields.index(_FIELD_OF[type(bc)]))
+        V = W if len(fields) == 1 else W.sub(fields.index(FIELD_OF[type(bc)]))
         if isinstance(bc, Displacement):
             V = V.sub(bc.component)
         facets = body.facet_tags.find(body.boundaries[bc.boundary])

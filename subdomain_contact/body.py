@@ -1,0 +1,664 @@
+"""One body: its Jacobian blocks over its fields, its factorisation, and its interface response.
+
+Linearised at the current state, body α with master increments ``y_k`` on its interfaces k
+solves (METHOD.md §3, Newton form)
+
+    A y = b − Σ_k B_k P_k y_k,        A = A_bulk + Σ_k L_k,
+
+with ``L_k`` the half-link's block on the body (slave rows and columns only) and ``B_k`` its
+coupling to the masters. Its share of the master residual of interface k is
+``r_k = P_kᵀ (C_k y + D_k P_k y_k)``. The half-link's fluxes appear in both with opposite
+signs, so ``C_k = −L_k + C̃_k`` and ``D_k = −B_k + D̃_k`` where the remainders C̃, D̃ (the
+contact's Joule heat) are small; likewise ``B_k P_k = (−L_k + B̃_k) P_k`` with ``B̃_k`` the
+coupling at a fixed jump (:class:`~subdomain_contact.physics.BodyForms`).
+
+Every one of these blocks lives on the *contact DOFs* (every field on the contact facets), a
+small block. The master residual of a DOF is taken in its stable form (docs/METHOD.md §4, §7):
+where the link is stiffer than the bulk, from the body's own equation,
+``L_k y + B_k P_k y_k = b − A_bulk y − Σ_{j≠k} (L_j y + B_j P_j y_j)`` on its free contact rows,
+which never subtracts two h̄-sized numbers; where it is softer, or the slave is fixed by a
+Dirichlet condition, from the link itself.
+
+A body held by one rank factorises ``A_bulk`` with MUMPS, leaving the contact DOFs as a dense
+Schur block Σ (:class:`~subdomain_contact.schur.CondensedFactor`): solves with ``A`` then
+replace that block by ``Σ + L``, the interface operator of the body is dense algebra on Σ, and
+a change of the contact laws alone (a Newton step whose bulk is linear) costs a new dense block,
+never a new sparse factorisation. A body spread over several ranks is factorised whole
+(MUMPS, distributed) and gets its interface operator from solves, a block of columns at a time.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import dolfinx.fem.petsc
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg
+import scipy.sparse
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave_map
+from subdomain_contact.physics import BodyForms, Problem, body_forms
+from subdomain_contact.scene import Body as SceneBody
+from subdomain_contact.schur import CondensedFactor
+from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+
+__all__ = ["Body"]
+
+Matrix = npt.NDArray[np.float64]
+Vector = npt.NDArray[np.float64]
+MasterValues = dict[str, npt.NDArray[np.float64]]
+
+
+def _depends_on(form: ufl.Form, functions: list[dolfinx.fem.Function]) -> bool:
+    """Whether a form, its derivatives expanded, has any of ``functions`` as coefficients."""
+    coefficients = set(ufl.algorithms.expand_derivatives(form).coefficients())
+    return any(f in coefficients for f in functions)
+
+
+class Body:
+    """A body's forms, blocks, factorisation and slave maps, for any set of fields.
+
+    Args:
+        problem: The problem.
+        body: The scene's body (held by this rank's group).
+        layers: Master layer of each interface the body touches, in scene order.
+        prefix: PETSc options prefix of the body's factorisation (``<prefix>mat_mumps_*``).
+        schur: Factorise with the contact DOFs left as a dense Schur block (a body on one
+            rank only); otherwise the whole body matrix is factorised.
+
+    Call :meth:`destroy` (collectively) when done.
+    """
+
+    def __init__(
+        self,
+        problem: Problem,
+        body: SceneBody,
+        layers: dict[str, MasterLayer],
+        *,
+        prefix: str,
+        schur: bool = True,
+    ) -> None:
+        self.forms: BodyForms = body_forms(problem, body)
+        self.name, self.U, W = body.name, self.forms.U, self.forms.W
+        self.comm: MPI.Comm = W.mesh.comm
+        self.prefix = prefix
+        self.layers = layers
+        bs = W.dofmap.index_map_bs
+        self.size = W.dofmap.index_map.size_local * bs
+        self.start = W.dofmap.index_map.local_range[0] * bs
+        self.slaves: dict[str, SlaveMap] = {
+            k: slave_map(self.forms, layer, body.facet_tags) for k, layer in layers.items()
+        }
+        self._index_contact_dofs(contact_dofs(self.forms, body.facet_tags, list(layers)))
+        self._compile()
+        self.schur = schur and self.comm.size == 1 and len(self.kept) > 0
+        self.factor: CondensedFactor | None = None
+        self.ksp: PETSc.KSP | None = None
+        self._A: PETSc.Mat | None = None
+        self._scaled: PETSc.Mat | None = None
+        self.factorisations = 0
+        self._bulk_current = False  # the factorisation is of the current bulk matrix
+        self._stiffness: Matrix | None = None
+        self._vectors = [self.A_bulk.createVecRight() for _ in range(3)]
+
+    # -- set-up ---------------------------------------------------------------------------
+    def _index_contact_dofs(self, kept_local: npt.NDArray[np.int32]) -> None:
+        """Contact DOFs: local, global, and each master DOF's position among them."""
+        self.kept_local = kept_local
+        counts = self.comm.allgather(len(kept_local))
+        offset = int(np.sum(counts[: self.comm.rank]))
+        self.kept_slice = slice(offset, offset + len(kept_local))
+        self.kept = np.concatenate(self.comm.allgather(self.start + kept_local))
+        fixed = self._fixed_local()
+        self.fixed_local = fixed
+        on_fixed = np.isin(kept_local, fixed).astype(float)
+        self.fixed_kept = np.flatnonzero(self._gather_kept(on_fixed) > 0)
+        self.free_kept = np.setdiff1d(np.arange(len(self.kept)), self.fixed_kept)
+        self.position: dict[str, npt.NDArray[np.int64]] = {}
+        for k, layer in self.layers.items():
+            slaves = self.slaves[k]
+            local = np.zeros(layer.size)
+            local[slaves.master_index] = offset + np.searchsorted(kept_local, slaves.local_dofs)
+            positions = self.comm.allreduce(local, op=MPI.SUM) if self.comm.size > 1 else local
+            self.position[k] = positions.astype(np.int64)
+
+    def _fixed_local(self) -> npt.NDArray[np.int32]:
+        """Owned DOFs fixed by Dirichlet conditions (local indices)."""
+        fixed = [bc.dof_indices()[0][: bc.dof_indices()[1]] for bc in self.forms.bcs]
+        every = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, np.int32)
+        return every[every < self.size].astype(np.int32)
+
+    def _compile(self) -> None:
+        """Forms of the residuals and Jacobian blocks, and the matrices they fill."""
+        f, U = self.forms, self.forms.U
+        trial = ufl.TrialFunction(f.W)
+        self.F_bulk = dolfinx.fem.form(f.bulk)
+        self.F_links = {k: dolfinx.fem.form(f.links[k]) for k in self.layers}
+        self.F_fluxes = {k: dolfinx.fem.form(f.fluxes[k]) for k in self.layers}
+        a_bulk = ufl.derivative(f.bulk, U, trial)
+        self.a_bulk = dolfinx.fem.form(a_bulk)
+        self.A_bulk = dolfinx.fem.petsc.create_matrix(self.a_bulk)
+        unknowns = [U, *f.masters.values()]
+        self.bulk_is_linear = not _depends_on(a_bulk, [U])
+        blocks: dict[str, dict[str, ufl.Form]] = {}
+        for k in self.layers:
+            Um = f.masters[k]
+            blocks[k] = {
+                "L": ufl.derivative(f.links[k], U, trial),
+                "B": ufl.derivative(f.links[k], Um, trial),
+            }
+            if f.remainders[k] is not None:
+                blocks[k]["Ct"] = ufl.derivative(f.remainders[k], U, trial)
+                blocks[k]["Dt"] = ufl.derivative(f.remainders[k], Um, trial)
+        self.links_are_linear = not any(
+            _depends_on(form, unknowns) for forms in blocks.values() for form in forms.values()
+        )
+        self.a_blocks = {
+            k: {name: dolfinx.fem.form(form) for name, form in forms.items()}
+            for k, forms in blocks.items()
+        }
+        self.block_matrices = {
+            k: {name: dolfinx.fem.petsc.create_matrix(a) for name, a in forms.items()}
+            for k, forms in self.a_blocks.items()
+        }
+        whole = f.bulk
+        for k in self.layers:
+            whole = whole + f.links[k]
+        self.a_whole = ufl.derivative(whole, U, trial)
+        self._kept_is = PETSc.IS().createGeneral(
+            (self.start + self.kept_local).astype(PETSc.IntType), comm=self.comm
+        )
+
+    @property
+    def is_linear(self) -> bool:
+        """Whether the body's Jacobian does not depend on the state (bulk and contact laws)."""
+        return self.bulk_is_linear and self.links_are_linear
+
+    def destroy(self) -> None:
+        """Free the body's PETSc objects (collective on its communicator)."""
+        if self.factor is not None:
+            self.factor.destroy()
+        mats = [m for forms in self.block_matrices.values() for m in forms.values()]
+        destroy(self.ksp, self.A_bulk, self._A, self._scaled, self._kept_is, *mats, *self._vectors)
+        self.factor, self.ksp, self._A = None, None, None
+
+    # -- assembly and factorisation ------------------------------------------------------
+    def assemble(self) -> None:
+        """Jacobian blocks at the current state (the bulk matrix only if it depends on it)."""
+        self._bulk_changed = not (self._bulk_current and self.bulk_is_linear)
+        if self._bulk_changed:
+            self.A_bulk.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(self.A_bulk, self.a_bulk, bcs=self.forms.bcs)
+            self.A_bulk.assemble()
+            self._bulk_current = False
+        self.blocks = {k: self._contact_blocks(k) for k in self.layers}
+        self._stiffness = None
+        self.use_link = self._soft_or_fixed()
+        free = scipy.sparse.diags(np.isin(np.arange(len(self.kept)), self.free_kept) * 1.0)
+        self.L = sum((b["L"] for b in self.blocks.values()), scipy.sparse.csr_matrix(
+            (len(self.kept),) * 2))  # fmt: skip
+        self.L_bc = (free @ self.L @ free).tocsr()
+
+    def factorise(self) -> None:
+        """The body's factorisation for the assembled blocks.
+
+        The sparse factorisation is made again only when the bulk matrix changed; with the
+        Schur block, changed contact blocks cost a new dense block.
+        """
+        if self.schur:
+            if not self._bulk_current or self.factor is None:
+                self._factorise_scaled()
+            d = self.scale[self.kept_local]
+            scaled = d[:, None] * self.L_bc.toarray() * d[None, :]
+            self.factor.update(scaled)
+            self.T_lu = scipy.linalg.lu_factor(self.factor.sigma + scaled)
+        elif not self._bulk_current or not self.links_are_linear or self.ksp is None:
+            self._factorise_whole()
+        self._bulk_current = True
+
+    def _factorise_scaled(self) -> None:
+        """MUMPS with the Schur block, of ``D A_bulk D``, ``D = |diag A_bulk|^(-1/2)``.
+
+        The symmetric scaling puts every field on the same footing (a stiffness of 1e11 Pa
+        beside a conductivity of 45 W/(m K)), so that the dense factorisation of the
+        Schur block, which pivots by size, does not mix their round-off.
+        """
+        diagonal = self.A_bulk.getDiagonal()
+        magnitude = np.abs(diagonal.array)
+        diagonal.destroy()
+        self.scale = 1.0 / np.sqrt(np.where(magnitude > 0, magnitude, 1.0))
+        D = self.A_bulk.createVecLeft()
+        D.array[:] = self.scale
+        zero = np.zeros((len(self.kept_local),) * 2)
+        if self.factor is None:
+            self._scaled = self.A_bulk.copy()
+            self._scaled.diagonalScale(D, D)
+            self.factor = CondensedFactor(self._scaled, self.kept_local, zero, self.prefix)
+        else:  # the same sparsity: MUMPS keeps its analysis (ordering, symbolic phase)
+            self.A_bulk.copy(self._scaled, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            self._scaled.diagonalScale(D, D)
+            self.factor.refactor(self._scaled, zero)
+        d = self.scale[self.kept_local]
+        self.sigma = self.factor.sigma / d[:, None] / d[None, :]
+        D.destroy()
+        self.factorisations += 1
+
+    def _soft_or_fixed(self) -> dict[str, npt.NDArray[np.bool_]]:
+        """Per master DOF of each interface: take the link form (soft link or fixed slave).
+
+        A link is soft for a field when its block's largest row sum is below the bulk's, on
+        the rows of that field.
+        """
+        indptr, _, data = self.A_bulk.getValuesCSR()
+        rows = np.add.reduceat(np.abs(data), indptr[:-1]) if data.size else np.zeros(0)
+        rows[indptr[:-1] == indptr[1:]] = 0.0
+        field_of = np.zeros(self.size, dtype=np.int32)
+        for f, name in enumerate(self.forms.fields):
+            dofs = self.forms.collapsed(name)[1]
+            field_of[dofs[dofs < self.size]] = f
+        bulk = np.zeros(len(self.forms.fields))
+        np.maximum.at(bulk, field_of, rows)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, bulk, op=MPI.MAX)
+        self._bulk_norms = bulk
+        self._field_dofs = [np.flatnonzero(field_of == f) for f in range(len(bulk))]
+        kept_field = self._gather_kept(field_of[self.kept_local].astype(float)).astype(int)
+        out = {}
+        for k, position in self.position.items():
+            link_rows = np.abs(self.blocks[k]["L"]).sum(axis=1).A1
+            fields = kept_field[position]
+            soft = np.zeros(len(position), dtype=bool)
+            for f in range(len(bulk)):
+                on = fields == f
+                soft[on] = link_rows[position[on]].max(initial=0.0) < bulk[f]
+            out[k] = soft | np.isin(position, self.fixed_kept)
+        return out
+
+    def _contact_blocks(self, k: str) -> dict[str, scipy.sparse.csr_matrix]:
+        """The blocks of interface k on the contact DOFs (no conditions), sparse, replicated.
+
+        ``L`` (contact DOFs²), ``BP = B_k P_k`` (contact DOFs × masters of k) and, with the
+        contact's Joule heat, ``CtP = P_kᵀ C̃_k`` and ``DtP = P_kᵀ D̃_k P_k``.
+        """
+        dense = {}
+        for name, a in self.a_blocks[k].items():
+            M = self.block_matrices[k][name]
+            M.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(M, a)
+            M.assemble()
+            dense[name] = self._gather_sparse(M)
+        at = self.position[k]
+        out = {"L": dense["L"], "BP": dense["B"][:, at].tocsr()}
+        if "Ct" in dense:
+            out["CtP"] = dense["Ct"][at, :].tocsr()
+            out["DtP"] = dense["Dt"][at, :][:, at].tocsr()
+        return out
+
+    def _gather_sparse(self, M: PETSc.Mat) -> scipy.sparse.csr_matrix:
+        """A matrix's contact-DOF block, sparse, on every rank of the body."""
+        sub = M.createSubMatrix(self._kept_is, self._kept_is)
+        indptr, indices, data = sub.getValuesCSR()
+        sub.destroy()
+        rows = scipy.sparse.csr_matrix(
+            (data.copy(), indices.copy(), indptr.copy()), shape=(len(indptr) - 1, len(self.kept))
+        )
+        if self.comm.size == 1:
+            return rows
+        return scipy.sparse.vstack(self.comm.allgather(rows)).tocsr()
+
+    def whole_matrix(self) -> PETSc.Mat:
+        """``A = A_bulk + Σ_k L_k`` with the Dirichlet conditions, at the current state.
+
+        The body keeps (and frees) the matrix.
+        """
+        if self._A is None:
+            self._a_whole = dolfinx.fem.form(self.a_whole)
+            self._A = dolfinx.fem.petsc.create_matrix(self._a_whole)
+        self._A.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self._A, self._a_whole, bcs=self.forms.bcs)
+        self._A.assemble()
+        return self._A
+
+    def _factorise_whole(self) -> None:
+        """``A`` as one sparse matrix, factorised by MUMPS (distributed)."""
+        self.whole_matrix()
+        if self.ksp is None:
+            self.ksp = make_ksp(self._A, self.prefix, DIRECT)
+        else:
+            self.ksp.setOperators(self._A)
+            self.ksp.setUp()
+        self.factorisations += 1
+
+    # -- solves -----------------------------------------------------------------------------
+    def _gather_kept(self, values: Vector) -> Vector:
+        """Owned contact-DOF values -> every contact DOF, on every rank."""
+        return np.concatenate(self.comm.allgather(values)) if self.comm.size > 1 else values
+
+    def solve(self, rhs: Vector) -> Vector:
+        """``A⁻¹ rhs`` on owned DOFs.
+
+        With several fields, one step of iterative refinement: the dense factorisation of
+        the Schur block pivots across fields (a Joule coupling can outweigh a conductivity by
+        1e6), which leaves a small field the round-off of a large one; the residual of the
+        first solve, computed with the sparse matrix, takes it back out.
+        """
+        if self.factor is None:
+            return self._solve_whole(rhs)
+        y = self._solve_schur(rhs)
+        if len(self.forms.fields) > 1:
+            residual = rhs - self._apply_A(y)
+            if self._polluted(residual, rhs, y):
+                y += self._solve_schur(residual)
+        return y
+
+    def _polluted(self, residual: Vector, rhs: Vector, y: Vector) -> bool:
+        """Whether some field's residual is above 1e3 eps of that field's own scale.
+
+        The scale of field f: ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (its rows' largest sum times its
+        own unknowns), which a solve that kept the fields apart reaches to a few eps.
+        """
+        for f, dofs in enumerate(self._field_dofs):
+            scale = np.abs(rhs[dofs]).max(initial=0.0)
+            scale += self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
+            if np.abs(residual[dofs]).max(initial=0.0) > 1e3 * np.finfo(float).eps * scale:
+                return True
+        return False
+
+    def _solve_schur(self, rhs: Vector) -> Vector:
+        b, x = self._vectors[0], self._vectors[1]
+        b.array[:] = self.scale * rhs
+        self.factor.solve(b, x)
+        return self.scale * x.array
+
+    def _apply_A(self, y: Vector) -> Vector:
+        """``A y = A_bulk y + Σ_k L_k y`` (conditions included) on owned DOFs."""
+        x, Ay = self._vectors[0], self._vectors[2]
+        x.array[:] = y
+        self.A_bulk.mult(x, Ay)
+        out = Ay.array.copy()
+        y_s = self._gather_kept(y[self.kept_local])
+        out[self.kept_local] += (self.L_bc @ y_s)[self.kept_slice]
+        return out
+
+    def _solve_whole(self, rhs: Vector) -> Vector:
+        b, x = self._vectors[0], self._vectors[1]
+        b.array[:] = rhs
+        self.ksp.solve(b, x)
+        if self.ksp.getConvergedReason() < 0:
+            reason = self.ksp.getConvergedReason()
+            raise RuntimeError(f"body '{self.name}': linear solve failed (reason {reason})")
+        return x.array.copy()
+
+    def coupling(self, masters: dict[str, Matrix]) -> Matrix:
+        """``Σ_k B_k P_k Y_k`` on the contact DOFs for columns Y, rows of fixed DOFs zeroed."""
+        out = np.zeros((len(self.kept), next(iter(masters.values())).shape[1]))
+        for k in self.layers:
+            out += self.blocks[k]["BP"] @ masters[k]
+        out[self.fixed_kept] = 0.0
+        return out
+
+    def round(self, b: Vector | None, masters: MasterValues) -> tuple[Vector, MasterValues]:
+        """Solve the body for master increments; its share of every master residual.
+
+        Args:
+            b: Right-hand side on owned DOFs, zero on fixed DOFs; None for zero.
+            masters: Interface name -> master values (replicated).
+
+        Returns:
+            The body's solution on owned DOFs, and interface name -> ``r_k`` (replicated).
+        """
+        columns = {k: v[:, None] for k, v in masters.items()}
+        rhs = np.zeros(self.size) if b is None else b.copy()
+        rhs[self.kept_local] -= self.coupling(columns)[self.kept_slice, 0]
+        y = self.solve(rhs)
+        x, Ay = self._vectors[0], self._vectors[2]
+        x.array[:] = y
+        self.A_bulk.mult(x, Ay)
+        kept = self.kept_local
+        b_s = self._gather_kept(np.zeros(len(kept)) if b is None else b[kept])
+        y_s, Ay_s = self._gather_kept(y[kept]), self._gather_kept(Ay.array[kept])
+        residuals = self._master_residuals(b_s[:, None], y_s[:, None], Ay_s[:, None], columns)
+        return y, {k: r[:, 0] for k, r in residuals.items()}
+
+    def _master_residuals(
+        self, b_s: Matrix, y_s: Matrix, Ay_s: Matrix, masters: dict[str, Matrix]
+    ) -> dict[str, Matrix]:
+        """``r_k`` for columns of contact-DOF solutions.
+
+        Two equal forms, each exact where the other loses digits: for a stiff link (its
+        block larger than the bulk's, field by field) the reaction form, the body's own
+        equation without the link; for a soft link, at fixed slaves, the link itself, whose
+        round-off scales with the link instead of the bulk.
+        """
+        link = {k: self.blocks[k]["L"] @ y_s + self.blocks[k]["BP"] @ masters[k]
+                for k in self.layers}  # fmt: skip
+        out = {}
+        for k, position in self.position.items():
+            share = b_s - Ay_s
+            for j in self.layers:
+                if j != k:
+                    share = share - link[j]
+            r = -share[position]
+            direct = self.use_link[k]
+            r[direct] = -link[k][position[direct]]
+            blocks = self.blocks[k]
+            if "CtP" in blocks:
+                r = r + blocks["CtP"] @ y_s + blocks["DtP"] @ masters[k]
+            out[k] = r
+        return out
+
+    # -- interface operators ---------------------------------------------------------------
+    def master_sizes(self) -> list[int]:
+        """Master DOFs of each of the body's interfaces, in ``layers`` order."""
+        return [layer.size for layer in self.layers.values()]
+
+    def master_slices(self) -> dict[str, slice]:
+        """Where each interface's masters sit in the body's concatenated master vector."""
+        ends = np.cumsum([0, *self.master_sizes()])
+        pairs = zip(self.layers, ends[:-1], ends[1:], strict=True)
+        return {k: slice(int(a), int(b)) for k, a, b in pairs}
+
+    def interface_stiffness(self) -> Matrix:
+        """Dense ``S^α`` over all the body's masters (interfaces in ``layers`` order).
+
+        The body's response to each unit master value, its master residuals in the reaction
+        form: with the Schur block ``y_s = (Σ + L)⁻¹ rhs_s`` and ``A_bulk y = Σ y_s`` on the
+        contact DOFs, dense algebra; otherwise one body solve per master DOF. Kept until the
+        next :meth:`assemble`.
+        """
+        if self._stiffness is None:
+            self._stiffness = self._form_stiffness()
+        return self._stiffness
+
+    def _form_stiffness(self) -> Matrix:
+        sizes = self.master_sizes()
+        unit = np.eye(sum(sizes))
+        masters = dict(zip(self.layers, np.split(unit, np.cumsum(sizes)[:-1]), strict=True))
+        response = self.respond(masters)
+        return np.concatenate([response[k] for k in self.layers])
+
+    def respond(self, masters: dict[str, Matrix]) -> dict[str, Matrix]:
+        """``S^α`` applied to columns of master values: the homogeneous master residuals."""
+        rhs_s = -self.coupling(masters)
+        if self.schur:
+            y_s = self._solve_kept(rhs_s)
+            if len(self.forms.fields) > 1:  # iterative refinement, as in :meth:`solve`
+                y_s += self._solve_kept(rhs_s - self.sigma @ y_s - self.L_bc @ y_s)
+            Ay_s = self.sigma @ y_s
+        else:
+            y_s, Ay_s = self._solve_columns(rhs_s)
+        return self._master_residuals(np.zeros_like(y_s), y_s, Ay_s, masters)
+
+    def _solve_kept(self, rhs_s: Matrix) -> Matrix:
+        """``(Σ + L)⁻¹ rhs_s`` by the scaled dense factorisation of the Schur block."""
+        d = self.scale[self.kept_local][:, None]
+        return d * scipy.linalg.lu_solve(self.T_lu, d * rhs_s)
+
+    def _solve_columns(self, rhs_s: Matrix) -> tuple[Matrix, Matrix]:
+        """Body solves for right-hand sides on the contact DOFs: ``y_s`` and ``(A_bulk y)_s``."""
+        y_s, Ay_s = np.zeros_like(rhs_s), np.zeros_like(rhs_s)
+        rhs = np.zeros(self.size)
+        x, Ay = self._vectors[0], self._vectors[2]
+        for j in range(rhs_s.shape[1]):
+            rhs[self.kept_local] = rhs_s[self.kept_slice, j]
+            x.array[:] = self.solve(rhs)
+            self.A_bulk.mult(x, Ay)
+            y_s[:, j] = self._gather_kept(x.array[self.kept_local])
+            Ay_s[:, j] = self._gather_kept(Ay.array[self.kept_local])
+        return y_s, Ay_s
+
+    def condensed_stiffness(self, k: str) -> Matrix:
+        """``K̂`` of interface k: the solid with its other half-links, condensed on k's masters.
+
+        Contact term of k excluded (METHOD.md §3); dense, in master order. From the Schur
+        block where there is one, else by one solve per master DOF. Slaves fixed by a
+        Dirichlet condition are made infinitely stiff (1e8 times the largest diagonal).
+        """
+        if not self.schur:
+            owned = np.arange(self.size, dtype=np.int32)
+            interior = np.setdiff1d(owned, self.slaves[k].local_dofs).astype(np.int32)
+            K_ee, coupling = self.condense(k, interior)
+            return self.clamp_fixed(k, K_ee - coupling)
+        free = scipy.sparse.diags(np.isin(np.arange(len(self.kept)), self.free_kept) * 1.0)
+        block = self.sigma + (free @ (self.L - self.blocks[k]["L"]) @ free).toarray()
+        at = self.position[k]
+        other = np.setdiff1d(np.arange(len(self.kept)), at)
+        K_hat = block[np.ix_(at, at)]
+        if other.size:
+            K_hat = K_hat - block[np.ix_(at, other)] @ np.linalg.solve(
+                block[np.ix_(other, other)], block[np.ix_(other, at)]
+            )
+        return self.clamp_fixed(k, K_hat)
+
+    def condense(self, k: str, interior: npt.NDArray[np.int32]) -> tuple[Matrix, Matrix]:
+        """The solid's blocks on the master channels e of k: ``K_ee`` and ``K_ei K_ii⁻¹ K_ie``.
+
+        The solid with its other half-links and its conditions; the owned DOFs ``interior``
+        are condensed, the others clamped. Both dense, in master order.
+        """
+        forms, U = self.forms, self.forms.U
+        solid = forms.bulk
+        for j in self.layers:
+            if j != k:
+                solid = solid + forms.links[j]
+        a = dolfinx.fem.form(ufl.derivative(solid, U, ufl.TrialFunction(forms.W)))
+        K = dolfinx.fem.petsc.assemble_matrix(a, bcs=forms.bcs)
+        K.assemble()
+        Kt = K.transpose(PETSc.Mat())
+        e, i = (
+            PETSc.IS().createGeneral((self.start + d).astype(PETSc.IntType), comm=self.comm)
+            for d in (self.slaves[k].local_dofs, interior)
+        )
+        K_ee, K_ie_sparse, K_ii, K_eiT = (
+            M.createSubMatrix(*p) for M, p in [(K, (e, e)), (K, (i, e)), (K, (i, i)), (Kt, (i, e))]
+        )
+        K_ie = K_ie_sparse.convert("dense", out=PETSc.Mat())
+        ksp = make_ksp(K_ii, f"{self.prefix}condense_", DIRECT)
+        X = K_ie.duplicate()
+        ksp.getPC().getFactorMatrix().matSolve(K_ie, X)
+        # K_ei X from the rows each rank owns, summed (PETSc's MPIAIJ × MPIDense product
+        # crashed here when a rank owns none of the slaves)
+        eiT = K_eiT.convert("dense", out=PETSc.Mat())
+        local = eiT.getDenseArray(readonly=True).T @ X.getDenseArray(readonly=True)
+        coupling = self.comm.allreduce(local, op=MPI.SUM) if self.comm.size > 1 else local
+        dense = K_ee.convert("dense", out=PETSc.Mat())
+        rows = dense.getDenseArray(readonly=True).copy()
+        rows = np.concatenate(self.comm.allgather(rows)) if self.comm.size > 1 else rows
+        order = self.slaves[k].gathered_master_index
+        result = []
+        for matrix in (rows, coupling):
+            reordered = np.empty_like(matrix)
+            reordered[np.ix_(order, order)] = matrix
+            result.append(reordered)
+        destroy(K, Kt, e, i, K_ee, K_ie_sparse, K_ii, K_eiT, K_ie, ksp, X, eiT, dense)
+        return result[0], result[1]
+
+    def clamp_fixed(self, k: str, stiffness: Matrix) -> Matrix:
+        """``stiffness`` (master order) with the fixed slaves of k made infinitely stiff."""
+        fixed = np.flatnonzero(np.isin(self.position[k], self.fixed_kept))
+        if fixed.size:
+            stiff = 1e8 * float(np.abs(np.diag(stiffness)).max())
+            stiffness = stiffness.copy()
+            stiffness[fixed, :] = 0.0
+            stiffness[:, fixed] = 0.0
+            stiffness[fixed, fixed] = stiff
+        return stiffness
+
+    def link_stiffness(self, k: str) -> Matrix:
+        """The half-link's own master block ``P_kᵀ D_k P_k`` (the paper's K_mm = h̄M)."""
+        D = -self.blocks[k]["BP"][self.position[k], :].toarray()
+        if "DtP" in self.blocks[k]:
+            D = D + self.blocks[k]["DtP"].toarray()
+        return D
+
+    # -- residuals ------------------------------------------------------------------------
+    def residual(self) -> Vector:
+        """Owned body residual at the current state; rows of fixed DOFs hold U − g."""
+        b = dolfinx.fem.petsc.assemble_vector(self.F_bulk)
+        for form in self.F_links.values():
+            dolfinx.fem.petsc.assemble_vector(b, form)
+        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        dolfinx.fem.petsc.set_bc(b, self.forms.bcs, x0=self.U.x.petsc_vec, alpha=-1.0)
+        values = b.array.copy()
+        b.destroy()
+        return values
+
+    def master_residual(self, k: str) -> Vector:
+        """This body's share ``r_k`` of the master residual of k at the current state."""
+        b = dolfinx.fem.petsc.assemble_vector(self.F_fluxes[k])
+        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        values = -self.slaves[k].gather(b.array, self.layers[k].size, self.comm)
+        b.destroy()
+        return values
+
+    def contact_share(self, k: str, load: Vector | None = None) -> Vector:
+        """``r_k`` at the current state, which must satisfy the body's equation.
+
+        In the stable form of each master DOF: the reaction of the bulk and the other links
+        (minus ``load``, nodal values [W] in master order put into the body at the slaves)
+        for a stiff link, the link itself for a soft one or a fixed slave.
+        """
+        b = dolfinx.fem.petsc.assemble_vector(self.F_bulk)
+        for j, form in self.F_links.items():
+            if j != k:
+                dolfinx.fem.petsc.assemble_vector(b, form)
+        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        rest = self.slaves[k].gather(b.array, self.layers[k].size, self.comm)
+        b.destroy()
+        if load is not None:
+            rest = rest - load
+        return np.where(self.use_link[k], self.master_residual(k), rest)
+
+    def set_masters(self, masters: MasterValues) -> None:
+        """Write replicated master vectors into the body's master Functions."""
+        for k, Um in self.forms.masters.items():
+            Um.x.array[:] = 0.0
+            self.slaves[k].scatter(masters[k], Um.x.array)
+            Um.x.scatter_forward()
+
+    def apply_conditions(self) -> None:
+        """Set the fixed DOFs to their prescribed values."""
+        for bc in self.forms.bcs:
+            bc.set(self.U.x.array)
+        self.U.x.scatter_forward()
+
+    def nodal(self, field: str, component: int | None = None) -> tuple[Matrix, Vector]:
+        """Coordinates [m] and values of one field (or component) at this rank's owned nodes."""
+        V, parent_of = self.forms.collapsed(field, component)
+        if V.dofmap.index_map_bs > 1:
+            raise ValueError(f"nodal('{field}'): give the component of a vector field")
+        owned = V.dofmap.index_map.size_local
+        return V.tabulate_dof_coordinates()[:owned], self.U.x.array[parent_of[:owned]]
+
+    def contact_integral(self, k: str, quantity: str) -> float:
+        """``∫_Γk q ds`` of a half-link quantity over the interface (collective).
+
+        ``quantity``: ``"pressure"`` [Pa], ``"current density"`` [A/m^2] or ``"heat flux"``
+        [W/m^2]; the integral is in that unit times m^(d-1).
+        """
+        forms = self.forms
+        form = dolfinx.fem.form(forms.contact[k][quantity] * forms.ds(forms.tags[k]))
+        return self.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)

@@ -1,0 +1,294 @@
+"""The discrete nonlinear system of a problem: every body and master layer, state and residual.
+
+Unknowns: each body's fields ``U^α`` and each interface's master channels ``U_m,k``. The body
+residuals and the master residuals ``Σ_α r^α_k = 0`` (paper eq. 3) come from the forms of
+:mod:`~subdomain_contact.physics`; the Jacobian blocks are each body's
+(:class:`~subdomain_contact.body.Body`).
+
+Global vectors (for SNES) hold, on each rank, the owned DOFs of the bodies its rank group
+solves, in scene order, then on rank 0 every master value. Master vectors are replicated on
+every rank. With ``placement="groups"`` a rank builds only its group's bodies, and the
+master residuals are summed over the groups.
+"""
+
+from __future__ import annotations
+
+import gc
+from collections.abc import Mapping
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from subdomain_contact.body import Body
+from subdomain_contact.masters import MasterLayer, master_layer
+from subdomain_contact.physics import FIELDS, Problem
+
+__all__ = ["System"]
+
+Vector = npt.NDArray[np.float64]
+
+
+class System:
+    """Every body of this rank's group and every master layer of a problem, with its state.
+
+    Args:
+        problem: The problem.
+        prefix: Options prefix of the bodies' factorisations: ``<prefix>body_<name>_``.
+        schur: Factorise a body held by one rank with its contact DOFs left as a dense Schur
+            block (False: factorise every body whole, as a body on several ranks is).
+
+    Call :meth:`destroy` (collectively) when done, or use the system as a context manager.
+    """
+
+    def __init__(self, problem: Problem, *, prefix: str = "sc_", schur: bool = True) -> None:
+        scene = problem.scene
+        self.problem, self.comm, self.prefix = problem, scene.comm, prefix
+        gc.collect()  # what earlier systems left: petsc4py hands it to PETSc's garbage,
+        for name, body in scene.bodies.items():  # destroyed here, collectively on each comm
+            if scene.is_local(name):
+                PETSc.garbage_cleanup(body.mesh.comm)
+        PETSc.garbage_cleanup(self.comm)
+        self.layers: dict[str, MasterLayer] = {
+            k: master_layer(problem, i) for k, i in scene.interfaces.items()
+        }
+        self.sizes = {k: layer.size for k, layer in self.layers.items()}
+        self.bodies: dict[str, Body] = {}
+        for name, body in scene.bodies.items():
+            if scene.is_local(name):
+                mine = {i.name: self.layers[i.name] for i in scene.interfaces_of(name)}
+                self.bodies[name] = Body(
+                    problem, body, mine, prefix=f"{prefix}body_{name}_", schur=schur
+                )
+        self.masters = {k: np.zeros(n) for k, n in self.sizes.items()}
+        self.master_fields = {
+            k: np.array([FIELDS.index(layer.channels[c][0]) for c in layer.field_index()])
+            for k, layer in self.layers.items()
+        }
+        self.active = {  # an insulating contact's channel has no equation: its masters stay 0
+            k: np.repeat(
+                [not problem.insulating(k, f) for f, _ in layer.channels], layer.nodes
+            ).astype(bool)
+            for k, layer in self.layers.items()
+        }
+        offsets = np.cumsum([0] + [b.size for b in self.bodies.values()])
+        self.slices = {
+            name: slice(int(a), int(b))
+            for name, a, b in zip(self.bodies, offsets[:-1], offsets[1:], strict=True)
+        }
+        master_total = sum(self.sizes.values()) if self.comm.rank == 0 else 0
+        self.local_size = int(offsets[-1]) + master_total
+        self.master_slice = slice(int(offsets[-1]), self.local_size)
+        self.field_of = self._field_index()
+        linear = self.comm.allreduce(all(b.is_linear for b in self.bodies.values()), op=MPI.LAND)
+        self.is_linear = bool(linear)
+        #: The Jacobian is symmetric: a linear problem of one field.
+        self.symmetric = self.is_linear and len(problem.fields) == 1
+        self.floating = self._everywhere({n: self._floats(b) for n, b in self.bodies.items()})
+
+    def __enter__(self) -> System:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.destroy()
+
+    def destroy(self) -> None:
+        """Free every body's PETSc objects (collective)."""
+        for body in self.bodies.values():
+            body.destroy()
+
+    # -- layout ---------------------------------------------------------------------------
+    def _floats(self, body: Body) -> bool:
+        """Whether some field of the body has no Dirichlet DOF (collective on the body)."""
+        fixed = np.zeros(len(FIELDS), dtype=int)
+        for f in self.problem.fields:
+            dofs = body.forms.collapsed(f)[1]
+            fixed[FIELDS.index(f)] = np.isin(body.fixed_local, dofs).sum()
+        fixed = body.comm.allreduce(fixed, op=MPI.SUM)
+        return any(fixed[FIELDS.index(f)] == 0 for f in self.problem.fields)
+
+    def _everywhere(self, local: dict) -> dict:
+        """Merge the groups' dictionaries (computed on their own bodies) on every rank."""
+        scene = self.problem.scene
+        if scene.shared:
+            return dict(local)
+        merged: dict = {}
+        for part in self.comm.allgather(local if scene.group_comm.rank == 0 else {}):
+            merged.update(part)
+        return merged
+
+    def everywhere(self, local: dict) -> dict:
+        """Dictionaries computed by each rank group on its own bodies, merged on every rank."""
+        return self._everywhere(local)
+
+    def total(self, values: Mapping[str, Vector]) -> dict[str, Vector]:
+        """Sum per-interface vectors of the local bodies over the groups (each counted once)."""
+        scene = self.problem.scene
+        if scene.shared:
+            return {k: np.asarray(v) for k, v in values.items()}
+        weight = 1.0 if scene.group_comm.rank == 0 else 0.0
+        return {k: self.comm.allreduce(weight * np.asarray(v)) for k, v in values.items()}
+
+    def bodies_of(self, k: str) -> list[Body]:
+        """The local bodies that touch interface ``k``."""
+        return [b for b in self.bodies.values() if k in b.layers]
+
+    def num_dofs(self) -> dict[str, int]:
+        """Global number of DOFs per body, and of master DOFs (``"masters"``); collective."""
+        counts = self._everywhere(
+            {n: b.comm.allreduce(b.size, op=MPI.SUM) for n, b in self.bodies.items()}
+        )
+        counts["masters"] = sum(self.sizes.values())
+        return counts
+
+    def create_vector(self) -> PETSc.Vec:
+        """A global vector with this system's layout."""
+        vec = PETSc.Vec().createMPI((self.local_size, PETSc.DETERMINE), comm=self.comm)
+        vec.setUp()
+        return vec
+
+    def split_masters(self, flat: Vector) -> dict[str, Vector]:
+        """Replicated master vectors from rank 0's master part of a global vector."""
+        flat = self.comm.bcast(np.asarray(flat) if self.comm.rank == 0 else None, root=0)
+        ends = np.cumsum(list(self.sizes.values()))
+        return dict(zip(self.sizes, np.split(flat, ends[:-1]), strict=True))
+
+    def join_masters(self, masters: Mapping[str, Vector]) -> Vector:
+        """Rank 0's master part of a global vector (empty on other ranks)."""
+        if self.comm.rank != 0 or not self.sizes:
+            return np.zeros(0)
+        return np.concatenate([masters[k] for k in self.sizes])
+
+    def _field_index(self) -> npt.NDArray[np.int32]:
+        """Index in :data:`FIELDS` of the field of every local entry of a global vector."""
+        index = np.zeros(self.local_size, dtype=np.int32)
+        for name, body in self.bodies.items():
+            part = np.zeros(body.size, dtype=np.int32)
+            for field in self.problem.fields:
+                dofs = body.forms.collapsed(field)[1]
+                part[dofs[dofs < body.size]] = FIELDS.index(field)
+            index[self.slices[name]] = part
+        index[self.master_slice] = self.join_masters(self.master_fields)
+        return index
+
+    # -- state ----------------------------------------------------------------------------
+    def reset(self, initial: Mapping[str, float] | None = None) -> None:
+        """Set every body and master value to a uniform initial guess (zero by default).
+
+        Args:
+            initial: Field name -> uniform value (e.g. ``{"temperature": 300.0}``).
+        """
+        initial = dict(initial or {})
+        for body in self.bodies.values():
+            body.U.x.array[:] = 0.0
+            for field, value in initial.items():
+                body.U.x.array[body.forms.collapsed(field)[1]] = value
+        self.masters = {}
+        for k, layer in self.layers.items():
+            values = [initial.get(f, 0.0) for f, _ in layer.channels]
+            self.masters[k] = np.repeat(values, layer.nodes).astype(float) * self.active[k]
+        for body in self.bodies.values():
+            body.set_masters(self.masters)
+
+    def apply_conditions(self) -> None:
+        """Set every body's fixed DOFs to their prescribed values."""
+        for body in self.bodies.values():
+            body.apply_conditions()
+
+    def state(self) -> PETSc.Vec:
+        """The current state as a new global vector."""
+        x = self.create_vector()
+        self.get_state(x)
+        return x
+
+    def get_state(self, x: PETSc.Vec) -> None:
+        """Copy the current state into global vector ``x``."""
+        for name, body in self.bodies.items():
+            x.array[self.slices[name]] = body.U.x.array[: body.size]
+        x.array[self.master_slice] = self.join_masters(self.masters)
+
+    def set_state(self, x: PETSc.Vec) -> None:
+        """Take the state from global vector ``x``."""
+        array = x.array_r
+        for name, body in self.bodies.items():
+            body.U.x.array[: body.size] = array[self.slices[name]]
+            body.U.x.scatter_forward()
+        self.masters = self.split_masters(array[self.master_slice])
+        for body in self.bodies.values():
+            body.set_masters(self.masters)
+
+    def difference(self, a: PETSc.Vec, b: PETSc.Vec) -> dict[str, float]:
+        """Per field, ``max |a − b| / max |b|`` over every body and master value (collective)."""
+        out = {}
+        for field in self.problem.fields:
+            mask = self.field_of == FIELDS.index(field)
+            local = np.abs(a.array_r - b.array_r)[mask].max(initial=0.0)
+            diff = self.comm.allreduce(local, op=MPI.MAX)
+            scale = self.comm.allreduce(np.abs(b.array_r)[mask].max(initial=0.0), op=MPI.MAX)
+            out[field] = float(diff / scale) if scale > 0 else float(diff)
+        return out
+
+    # -- residual and Jacobian ------------------------------------------------------------
+    def residual(self, f: PETSc.Vec) -> None:
+        """Residual of every body and master equation at the current state, into ``f``."""
+        out = f.array
+        local = {k: np.zeros(n) for k, n in self.sizes.items()}
+        for name, body in self.bodies.items():
+            out[self.slices[name]] = body.residual()
+            for k in body.layers:
+                local[k] += body.master_residual(k)
+        masters = self.total(local)
+        out[self.master_slice] = self.join_masters(
+            {k: np.where(self.active[k], r, self.masters[k]) for k, r in masters.items()}
+        )
+
+    def assemble_jacobian(self) -> None:
+        """Every body's Jacobian blocks at the current state (the linear solver factorises)."""
+        for body in self.bodies.values():
+            body.assemble()
+
+    def mult(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """``y = J x`` with the assembled blocks."""
+        array, out = x.array_r, y.array
+        masters = self.split_masters(array[self.master_slice])
+        local = {k: np.zeros(n) for k, n in self.sizes.items()}
+        for name, body in self.bodies.items():
+            columns = {k: masters[k][:, None] for k in body.layers}
+            xb = array[self.slices[name]]
+            s, t = body._vectors[0], body._vectors[1]
+            s.array[:] = xb
+            body.A_bulk.mult(s, t)
+            x_s = body._gather_kept(xb[body.kept_local])[:, None]
+            kept = (body.L_bc @ x_s)[:, 0] + body.coupling(columns)[:, 0]
+            values = t.array.copy()
+            values[body.kept_local] += kept[body.kept_slice]
+            out[self.slices[name]] = values
+            for k in body.layers:
+                blocks = body.blocks[k]
+                link = blocks["L"] @ x_s + blocks["BP"] @ columns[k]
+                r = -link[body.position[k], 0]
+                if "CtP" in blocks:
+                    r = r + (blocks["CtP"] @ x_s + blocks["DtP"] @ columns[k])[:, 0]
+                local[k] += r
+        result = self.total(local)
+        out[self.master_slice] = self.join_masters(
+            {k: np.where(self.active[k], r, masters[k]) for k, r in result.items()}
+        )
+
+    def field_norms(self, f: PETSc.Vec) -> dict[str, float]:
+        """2-norm of each field's part of global vector ``f`` (collective)."""
+        squares = np.array(
+            [np.sum(f.array_r[self.field_of == FIELDS.index(n)] ** 2) for n in self.problem.fields]
+        )
+        totals = self.comm.allreduce(squares, op=MPI.SUM)
+        return {n: float(np.sqrt(s)) for n, s in zip(self.problem.fields, totals, strict=True)}
+
+    def master_field_norms(self, masters: Mapping[str, Vector]) -> dict[str, float]:
+        """2-norm of each field's part of replicated master vectors (active DOFs)."""
+        norms = dict.fromkeys(self.problem.fields, 0.0)
+        for k, r in masters.items():
+            for f in self.problem.fields:
+                mask = (self.master_fields[k] == FIELDS.index(f)) & self.active[k]
+                norms[f] += float(np.sum(r[mask] ** 2))
+        return {f: float(np.sqrt(v)) for f, v in norms.items()}

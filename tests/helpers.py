@@ -1,0 +1,56 @@
+"""Solves used across the tests: the subdomain iteration as a linear solver, and Newton."""
+
+import subdomain_contact as sc
+
+#: Systems the helpers made during the current test, destroyed after it (conftest).
+SYSTEMS: list[sc.System] = []
+
+
+def make_system(problem, **options):
+    """A system destroyed after the current test."""
+    system = sc.System(problem, **options)
+    SYSTEMS.append(system)
+    return system
+
+
+def linear_solve(problem, corrector=None, *, rtol=1e-10, **options):
+    """The whole linear problem by the subdomain iteration alone: (system, inner result).
+
+    One Newton step from the cold state, its linear solve driven directly (so that a failing
+    iteration raises :class:`~subdomain_contact.SubdomainConvergenceError` with its history);
+    the system then holds the solution.
+    """
+    system = make_system(problem)
+    system.reset()
+    system.apply_conditions()
+    f = system.create_vector()
+    system.residual(f)
+    system.assemble_jacobian()
+    solver = sc.Subdomains(corrector, **options)
+    solver.setup(system)
+    y, result = solver.solve(f.array_r.copy(), sc.Tolerance(rtol=rtol))
+    x = system.state()
+    x.array[:] -= y
+    system.set_state(x)
+    for vec in (f, x):
+        vec.destroy()
+    return system, result
+
+
+def snapshot(system, field="temperature"):
+    """Body name -> owned values of a scalar field (copies), and the masters."""
+    from verification.nodal import field_values
+
+    return field_values(system, field)[1], {k: v.copy() for k, v in system.masters.items()}
+
+
+def monolithic(system):
+    """The monolithic reference of the same system, solved from the cold state.
+
+    From the cold state, not from the subdomain solution it is compared with: Newton would
+    find that one converged already and take no step.
+    """
+    system.reset()
+    result = sc.solve(system, sc.Monolithic())
+    assert result.iterations >= 1
+    return result
