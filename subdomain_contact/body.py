@@ -195,6 +195,13 @@ class Body:
             self.A_bulk.assemble()
             self._bulk_current = False
         self.blocks = {k: self._contact_blocks(k) for k in self.layers}
+        self._rows = {  # every link's blocks on the slave rows of each interface
+            k: {
+                name: {j: self.blocks[j][name][at].tocsr() for j in self.layers}
+                for name in ("L", "BP")
+            }
+            for k, at in self.position.items()
+        }
         self._stiffness = None
         self.use_link = self._soft_or_fixed()
         free = scipy.sparse.diags(np.isin(np.arange(len(self.kept)), self.free_kept) * 1.0)
@@ -266,6 +273,7 @@ class Body:
         self._bulk_norms = bulk
         self._field_dofs = [np.flatnonzero(field_of == f) for f in range(len(bulk))]
         kept_field = self._gather_kept(field_of[self.kept_local].astype(float)).astype(int)
+        self._kept_field_dofs = [np.flatnonzero(kept_field == f) for f in range(len(bulk))]
         out = {}
         for k, position in self.position.items():
             link_rows = np.abs(self.blocks[k]["L"]).sum(axis=1).A1
@@ -354,13 +362,14 @@ class Body:
                 y += self._solve_schur(residual)
         return y
 
-    def _polluted(self, residual: Vector, rhs: Vector, y: Vector) -> bool:
+    def _polluted(self, residual: Matrix, rhs: Matrix, y: Matrix, *, kept: bool = False) -> bool:
         """Whether some field's residual is above 1e3 eps of that field's own scale.
 
         The scale of field f: ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (its rows' largest sum times its
         own unknowns), which a solve that kept the fields apart reaches to a few eps.
+        ``kept``: the arrays are on the contact DOFs (rows), not on the owned DOFs.
         """
-        for f, dofs in enumerate(self._field_dofs):
+        for f, dofs in enumerate(self._kept_field_dofs if kept else self._field_dofs):
             scale = np.abs(rhs[dofs]).max(initial=0.0)
             scale += self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
             if np.abs(residual[dofs]).max(initial=0.0) > 1e3 * np.finfo(float).eps * scale:
@@ -420,30 +429,34 @@ class Body:
         kept = self.kept_local
         b_s = self._gather_kept(np.zeros(len(kept)) if b is None else b[kept])
         y_s, Ay_s = self._gather_kept(y[kept]), self._gather_kept(Ay.array[kept])
-        residuals = self._master_residuals(b_s[:, None], y_s[:, None], Ay_s[:, None], columns)
+        b_rows = {k: b_s[at, None] for k, at in self.position.items()}
+        Ay_rows = {k: Ay_s[at, None] for k, at in self.position.items()}
+        residuals = self._master_residuals(b_rows, y_s[:, None], Ay_rows, columns)
         return y, {k: r[:, 0] for k, r in residuals.items()}
 
     def _master_residuals(
-        self, b_s: Matrix, y_s: Matrix, Ay_s: Matrix, masters: dict[str, Matrix]
+        self,
+        b_rows: dict[str, Matrix],
+        y_s: Matrix,
+        Ay_rows: dict[str, Matrix],
+        masters: dict[str, Matrix],
     ) -> dict[str, Matrix]:
-        """``r_k`` for columns of contact-DOF solutions.
+        """``r_k`` for columns of contact-DOF solutions ``y_s``.
 
-        Two equal forms, each exact where the other loses digits: for a stiff link (its
-        block larger than the bulk's, field by field) the reaction form, the body's own
-        equation without the link; for a soft link, at fixed slaves, the link itself, whose
-        round-off scales with the link instead of the bulk.
+        ``b_rows[k]`` and ``Ay_rows[k]``: the right-hand side and ``A_bulk y`` on the slave
+        rows of k (``position[k]``). Two equal forms, each exact where the other loses digits:
+        for a stiff link (its block larger than the bulk's, field by field) the reaction
+        form, the body's own equation without the link; for a soft link, and at fixed
+        slaves, the link itself, whose round-off scales with the link instead of the bulk.
         """
-        link = {k: self.blocks[k]["L"] @ y_s + self.blocks[k]["BP"] @ masters[k]
-                for k in self.layers}  # fmt: skip
         out = {}
-        for k, position in self.position.items():
-            share = b_s - Ay_s
+        for k, rows in self._rows.items():
+            link = {j: rows["L"][j] @ y_s + rows["BP"][j] @ masters[j] for j in self.layers}
+            share = b_rows[k] - Ay_rows[k]
             for j in self.layers:
                 if j != k:
                     share = share - link[j]
-            r = -share[position]
-            direct = self.use_link[k]
-            r[direct] = -link[k][position[direct]]
+            r = np.where(self.use_link[k][:, None], -link[k], -share)
             blocks = self.blocks[k]
             if "CtP" in blocks:
                 r = r + blocks["CtP"] @ y_s + blocks["DtP"] @ masters[k]
@@ -486,11 +499,17 @@ class Body:
         if self.schur:
             y_s = self._solve_kept(rhs_s)
             if len(self.forms.fields) > 1:  # iterative refinement, as in :meth:`solve`
-                y_s += self._solve_kept(rhs_s - self.sigma @ y_s - self.L_bc @ y_s)
-            Ay_s = self.sigma @ y_s
+                # probed on one combination of the columns (cheap), refined on all
+                z = np.random.default_rng(0).standard_normal(y_s.shape[1])
+                yz, bz = y_s @ z, rhs_s @ z
+                if self._polluted(bz - self.sigma @ yz - self.L_bc @ yz, bz, yz, kept=True):
+                    y_s += self._solve_kept(rhs_s - self.sigma @ y_s - self.L_bc @ y_s)
+            Ay_rows = {k: self.sigma[at] @ y_s for k, at in self.position.items()}
         else:
             y_s, Ay_s = self._solve_columns(rhs_s)
-        return self._master_residuals(np.zeros_like(y_s), y_s, Ay_s, masters)
+            Ay_rows = {k: Ay_s[at] for k, at in self.position.items()}
+        zero = {k: np.zeros((len(at), y_s.shape[1])) for k, at in self.position.items()}
+        return self._master_residuals(zero, y_s, Ay_rows, masters)
 
     def _solve_kept(self, rhs_s: Matrix) -> Matrix:
         """``(Σ + L)⁻¹ rhs_s`` by the scaled dense factorisation of the Schur block."""

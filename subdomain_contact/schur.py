@@ -79,31 +79,53 @@ class CondensedFactor:
         if K.getComm().getSize() != 1:
             raise ValueError(f"{prefix}: a Schur complement needs the matrix on one rank")
         self.size, self.prefix = len(kept), prefix
-        self.pc = PETSc.PC().create(K.getComm())
-        self.pc.setOptionsPrefix(prefix)
-        self.pc.setOperators(K)
-        self.pc.setType("lu")
-        self.pc.setFactorSolverType("mumps")
-        self.pc.setFromOptions()
-        self.pc.setFactorSetUpSolverType()
-        self.F = self.pc.getFactorMatrix()
-        rows = PETSc.IS().createGeneral(np.asarray(kept, dtype=PETSc.IntType), comm=K.getComm())
-        _call("MatFactorSetSchurIS", self.F.handle, rows.handle)
-        rows.destroy()
-        self._factorise(K)
+        self.kept = np.asarray(kept, dtype=PETSc.IntType)
+        self.pc: PETSc.PC | None = None
+        self._build(K)
         self.update(added)
+
+    def _build(self, K: PETSc.Mat) -> None:
+        """A MUMPS LU of K with the Schur rows set, factorised.
+
+        MUMPS estimates its workspace before it factorises, and a large Schur block can make
+        the estimate too small (INFO(1) = −9, PETSc's "out of memory"): the factorisation is
+        then made again with the workspace relaxation ICNTL(14) doubled, up to 1600 %.
+        """
+        relaxation = 20  # MUMPS's default, in percent
+        while True:
+            if self.pc is not None:
+                self.pc.destroy()
+            self.pc = PETSc.PC().create(K.getComm())
+            self.pc.setOptionsPrefix(self.prefix)
+            self.pc.setOperators(K)
+            self.pc.setType("lu")
+            self.pc.setFactorSolverType("mumps")
+            self.pc.setFromOptions()
+            self.pc.setFactorSetUpSolverType()
+            self.F = self.pc.getFactorMatrix()
+            if relaxation > 20:
+                self.F.setMumpsIcntl(14, relaxation)
+            rows = PETSc.IS().createGeneral(self.kept, comm=K.getComm())
+            _call("MatFactorSetSchurIS", self.F.handle, rows.handle)
+            rows.destroy()
+            self.pc.setUp()
+            reason = self.pc.getFailedReason()
+            if reason != PETSc.PC.FailedReason.FACTOR_OUTMEMORY or relaxation >= 1600:
+                break
+            relaxation *= 2
+        if reason != 0:
+            raise RuntimeError(f"{self.prefix}: factorisation failed (PETSc reason {reason})")
+        self.sigma = self._write_block(None)
 
     def refactor(self, K: PETSc.Mat, added: Matrix) -> None:
         """Factorise new values of the same sparsity pattern (MUMPS's analysis is kept)."""
         self.pc.setOperators(K)
-        self._factorise(K)
-        self.update(added)
-
-    def _factorise(self, K: PETSc.Mat) -> None:
         self.pc.setUp()
-        if self.pc.getFailedReason() != 0:
-            raise RuntimeError(f"{self.prefix}: factorisation failed ({self.pc.getFailedReason()})")
-        self.sigma = self._write_block(None)
+        if self.pc.getFailedReason() != 0:  # the workspace estimate fell short: start again
+            self._build(K)
+        else:
+            self.sigma = self._write_block(None)
+        self.update(added)
 
     def update(self, added: Matrix) -> None:
         """Make the dense block ``Σ + added`` and factorise it: solves are then with ``K + H``."""

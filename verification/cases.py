@@ -30,6 +30,8 @@ __all__ = [
     "TwoPlatesCase",
     "bars_scene",
     "blocks3d_scene",
+    "cathode_slot",
+    "cathode_slot_scene",
     "heated_blocks",
     "joule_bars",
     "squeezed_joule_bars",
@@ -305,3 +307,86 @@ def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
             Displacement("bottom", 1, 0.0),
         ],
     )
+
+
+def cathode_slot_scene(
+    size: float = 0.04,
+    fine: float = 0.016,
+    *,
+    depth: float = 0.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
+) -> Scene:
+    """``geo/cathode_slot.geo``: block, cast iron and bar; 2D, or a 3D slice of ``depth`` [m]."""
+    return load_scene(
+        GEO / "cathode_slot.geo",
+        bodies=["block", "cast_iron", "bar"],
+        interfaces=["slot_side", "slot_top", "bar_side", "bar_top"],
+        parameters={"size": size, "fine": fine, "depth": depth},
+        comm=comm,
+        placement=placement,
+    )
+
+
+def cathode_slot(scene: Scene, *, mechanics: bool = True, voltage: float = 0.05) -> Problem:
+    """The three bodies heated from the bath side, current from the top into the bar.
+
+    Test data of the right orders of magnitude, not the sourced industrial data (the
+    collector bar slot scene has those): graphitized carbon (k 100 W/(m K), σ 1e5 S/m,
+    E 10 GPa, α 4e-6/K), cast iron and steel with conductivities falling with T; contacts whose
+    conductances grow with the pressure (g of carbon against cast iron ≈ 1/(4 µΩ m²) at low
+    pressure). T = 1230 K and ``voltage`` [V] on the top, φ = 0 under the bar, convection to
+    350 K elsewhere; symmetry (u_x = 0) on x = 0, rollers under the bodies and, in 3D, on the
+    slice's two faces. Every reference temperature is 300 K: a cold start is stress-free.
+    """
+    dim = next(iter(scene.bodies.values())).mesh.geometry.dim
+    solid = {"reference_temperature": 300.0} if mechanics else {}
+
+    def elastic(young, poisson, expansion):
+        return {"young": young, "poisson": poisson, "expansion": expansion} if mechanics else {}
+
+    materials = {
+        "block": Material(
+            conductivity=100.0, electrical_conductivity=1e5, **elastic(10e9, 0.2, 4e-6), **solid
+        ),
+        "cast_iron": Material(
+            conductivity=lambda p, T: 40.0 / (1 + 5e-4 * (T - 300.0)),
+            electrical_conductivity=lambda p, T: 1.2e6 / (1 + 1e-3 * (T - 300.0)),
+            **elastic(100e9, 0.26, 1.1e-5),
+            **solid,
+        ),
+        "bar": Material(
+            conductivity=lambda p, T: 45.0 / (1 + 3e-4 * (T - 300.0)),
+            electrical_conductivity=lambda p, T: 5e6 / (1 + 4e-3 * (T - 300.0)),
+            **elastic(200e9, 0.3, 1.2e-5),
+            **solid,
+        ),
+    }
+    rough = laws.PowerLaw(scale=2e3, hardness=1e7, exponent=0.8, floor=500.0)
+    normal = {"normal": Penalty(1e12)} if mechanics else {}
+    slot = Contact(
+        conductance=rough,
+        electrical_conductance=lambda p, T: 2.5e5 * (1 + p / 1e6),
+        **normal,
+    )
+    bar = Contact(
+        conductance=5e3, electrical_conductance=lambda p, T: 1e7 * (1 + p / 1e7), **normal
+    )
+    contacts = {"slot_side": slot, "slot_top": slot, "bar_side": bar, "bar_top": bar}
+    conditions = [
+        Temperature("top", 1230.0),
+        Potential("top", voltage),
+        Potential("bar_bottom", 0.0),
+        Convection("bottom", 5.0, 350.0),
+        Convection("bar_bottom", 50.0, 350.0),
+        Convection("block_side", 5.0, 350.0),
+    ]
+    if mechanics:
+        conditions += [
+            Displacement("symmetry", 0, 0.0),
+            Displacement("bottom", 1, 0.0),
+            Displacement("bar_bottom", 1, 0.0),
+        ]
+        if dim == 3:
+            conditions += [Displacement("front", 2, 0.0), Displacement("back", 2, 0.0)]
+    return Problem(scene, materials, contacts, conditions)
