@@ -100,7 +100,8 @@ class Body:
         self._A: PETSc.Mat | None = None
         self._scaled: PETSc.Mat | None = None
         self.factorisations = 0
-        self._bulk_current = False  # the factorisation is of the current bulk matrix
+        # Jacobian assemblies, and the one the bulk (and whole) matrix was assembled at
+        self._step, self._bulk_step, self._whole_step = 0, -1, -1
         self._stiffness: Matrix | None = None
         self._vectors = [self.A_bulk.createVecRight() for _ in range(3)]
 
@@ -187,13 +188,12 @@ class Body:
 
     # -- assembly and factorisation ------------------------------------------------------
     def assemble(self) -> None:
-        """Jacobian blocks at the current state (the bulk matrix only if it depends on it)."""
-        self._bulk_changed = not (self._bulk_current and self.bulk_is_linear)
-        if self._bulk_changed:
-            self.A_bulk.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix(self.A_bulk, self.a_bulk, bcs=self.forms.bcs)
-            self.A_bulk.assemble()
-            self._bulk_current = False
+        """Jacobian blocks of the contact at the current state.
+
+        The bulk matrix waits for :meth:`bulk_matrix` (a factorisation asks for it, the
+        monolithic reference does not).
+        """
+        self._step += 1
         self.blocks = {k: self._contact_blocks(k) for k in self.layers}
         self._rows = {  # every link's blocks on the slave rows of each interface
             k: {
@@ -203,11 +203,27 @@ class Body:
             for k, at in self.position.items()
         }
         self._stiffness = None
-        self.use_link = self._soft_or_fixed()
         free = scipy.sparse.diags(np.isin(np.arange(len(self.kept)), self.free_kept) * 1.0)
         self.L = sum((b["L"] for b in self.blocks.values()), scipy.sparse.csr_matrix(
             (len(self.kept),) * 2))  # fmt: skip
         self.L_bc = (free @ self.L @ free).tocsr()
+
+    def bulk_matrix(self) -> PETSc.Mat:
+        """``A_bulk`` with the Dirichlet conditions at the current state.
+
+        Assembled again only when it depends on the state; returns whether it changed in
+        ``self._bulk_changed``.
+        """
+        self._bulk_changed = self._bulk_step < 0 or (
+            not self.bulk_is_linear and self._bulk_step != self._step
+        )
+        if self._bulk_changed:
+            self.A_bulk.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(self.A_bulk, self.a_bulk, bcs=self.forms.bcs)
+            self.A_bulk.assemble()
+            self._bulk_norms_by_field()
+        self._bulk_step = self._step
+        return self.A_bulk
 
     def factorise(self) -> None:
         """The body's factorisation for the assembled blocks.
@@ -215,16 +231,17 @@ class Body:
         The sparse factorisation is made again only when the bulk matrix changed; with the
         Schur block, changed contact blocks cost a new dense block.
         """
+        self.bulk_matrix()
+        self.use_link = self._soft_or_fixed()
         if self.schur:
-            if not self._bulk_current or self.factor is None:
+            if self._bulk_changed or self.factor is None:
                 self._factorise_scaled()
             d = self.scale[self.kept_local]
             scaled = d[:, None] * self.L_bc.toarray() * d[None, :]
             self.factor.update(scaled)
             self.T_lu = scipy.linalg.lu_factor(self.factor.sigma + scaled)
-        elif not self._bulk_current or not self.links_are_linear or self.ksp is None:
+        elif self._bulk_changed or not self.links_are_linear or self.ksp is None:
             self._factorise_whole()
-        self._bulk_current = True
 
     def _factorise_scaled(self) -> None:
         """MUMPS with the Schur block, of ``D A_bulk D``, ``D = |diag A_bulk|^(-1/2)``.
@@ -253,12 +270,8 @@ class Body:
         D.destroy()
         self.factorisations += 1
 
-    def _soft_or_fixed(self) -> dict[str, npt.NDArray[np.bool_]]:
-        """Per master DOF of each interface: take the link form (soft link or fixed slave).
-
-        A link is soft for a field when its block's largest row sum is below the bulk's, on
-        the rows of that field.
-        """
+    def _bulk_norms_by_field(self) -> None:
+        """The bulk matrix's largest row sum on the rows of each field (on every rank)."""
         indptr, _, data = self.A_bulk.getValuesCSR()
         rows = np.add.reduceat(np.abs(data), indptr[:-1]) if data.size else np.zeros(0)
         rows[indptr[:-1] == indptr[1:]] = 0.0
@@ -273,15 +286,23 @@ class Body:
         self._bulk_norms = bulk
         self._field_dofs = [np.flatnonzero(field_of == f) for f in range(len(bulk))]
         kept_field = self._gather_kept(field_of[self.kept_local].astype(float)).astype(int)
+        self._kept_field = kept_field
         self._kept_field_dofs = [np.flatnonzero(kept_field == f) for f in range(len(bulk))]
+
+    def _soft_or_fixed(self) -> dict[str, npt.NDArray[np.bool_]]:
+        """Per master DOF of each interface: take the link form (soft link or fixed slave).
+
+        A link is soft for a field when its block's largest row sum is below the bulk's, on
+        the rows of that field.
+        """
         out = {}
         for k, position in self.position.items():
             link_rows = np.abs(self.blocks[k]["L"]).sum(axis=1).A1
-            fields = kept_field[position]
+            fields = self._kept_field[position]
             soft = np.zeros(len(position), dtype=bool)
-            for f in range(len(bulk)):
+            for f, bulk in enumerate(self._bulk_norms):
                 on = fields == f
-                soft[on] = link_rows[position[on]].max(initial=0.0) < bulk[f]
+                soft[on] = link_rows[position[on]].max(initial=0.0) < bulk
             out[k] = soft | np.isin(position, self.fixed_kept)
         return out
 
@@ -325,10 +346,41 @@ class Body:
         if self._A is None:
             self._a_whole = dolfinx.fem.form(self.a_whole)
             self._A = dolfinx.fem.petsc.create_matrix(self._a_whole)
-        self._A.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(self._A, self._a_whole, bcs=self.forms.bcs)
-        self._A.assemble()
+        if self._whole_step != self._step:
+            self._A.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(self._A, self._a_whole, bcs=self.forms.bcs)
+            self._A.assemble()
+            self._whole_step = self._step
         return self._A
+
+    def apply_jacobian(
+        self, x: Vector, masters: dict[str, Vector]
+    ) -> tuple[Vector, dict[str, Vector]]:
+        """The body's rows of ``J [x; y_m]`` (owned) and its shares ``C_k x + D_k P_k y_k``.
+
+        With the whole matrix where it is assembled for this state (the monolithic
+        reference), else with the bulk matrix and the contact blocks.
+        """
+        columns = {k: v[:, None] for k, v in masters.items()}
+        v, out = self._vectors[0], self._vectors[1]
+        v.array[:] = x
+        x_s = self._gather_kept(x[self.kept_local])[:, None]
+        kept = self.coupling(columns)[:, 0]
+        if self._whole_step == self._step:
+            self._A.mult(v, out)
+        else:
+            self.bulk_matrix().mult(v, out)
+            kept = kept + (self.L_bc @ x_s)[:, 0]
+        rows = out.array.copy()
+        rows[self.kept_local] += kept[self.kept_slice]
+        shares = {}
+        for k in self.layers:
+            blocks = self.blocks[k]
+            r = -(blocks["L"] @ x_s + blocks["BP"] @ columns[k])[self.position[k], 0]
+            if "CtP" in blocks:
+                r = r + (blocks["CtP"] @ x_s + blocks["DtP"] @ columns[k])[:, 0]
+            shares[k] = r
+        return rows, shares
 
     def _factorise_whole(self) -> None:
         """``A`` as one sparse matrix, factorised by MUMPS (distributed)."""

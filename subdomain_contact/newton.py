@@ -192,8 +192,9 @@ class _Callbacks:
             self.monitor(it)
         if not np.isfinite(total):
             return reasons.DIVERGED_FNORM_NAN
-        for name, value in fields.items():
-            self.scale[name] = max(self.scale.get(name, 0.0), value)
+        if it == 0:  # the scale: the cold state's residual or the initial one, the larger
+            for name, value in fields.items():
+                self.scale[name] = max(self.scale.get(name, 0.0), value)
         if self.system.is_linear and it >= 1 and self.inner_converged:
             return reasons.CONVERGED_FNORM_RELATIVE  # one exact step: the inner solve's rtol
         progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
@@ -230,9 +231,10 @@ def solve(
 ) -> Result:
     """Newton's method on the system, from its current state.
 
-    Converged when every field's residual is below ``rtol`` times its scale: the largest of
-    the residuals it has had and of its residual at the *cold state* (every unknown zero but
-    the Dirichlet values), which measures the loads the field can see. A linear problem is
+    Converged when every field's residual is below ``rtol`` times its scale: the larger of
+    its initial residual and of its residual at the *cold state* (every unknown zero but the
+    Dirichlet values), which measures the loads the field can see. (Not the iterates': an
+    iterate that overshoots would otherwise loosen the test.) A linear problem is
     solved in one step, its inner solve to ``rtol``.
 
     Args:

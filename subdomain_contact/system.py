@@ -254,22 +254,11 @@ class System:
         masters = self.split_masters(array[self.master_slice])
         local = {k: np.zeros(n) for k, n in self.sizes.items()}
         for name, body in self.bodies.items():
-            columns = {k: masters[k][:, None] for k in body.layers}
-            xb = array[self.slices[name]]
-            s, t = body._vectors[0], body._vectors[1]
-            s.array[:] = xb
-            body.A_bulk.mult(s, t)
-            x_s = body._gather_kept(xb[body.kept_local])[:, None]
-            kept = (body.L_bc @ x_s)[:, 0] + body.coupling(columns)[:, 0]
-            values = t.array.copy()
-            values[body.kept_local] += kept[body.kept_slice]
-            out[self.slices[name]] = values
-            for k in body.layers:
-                blocks = body.blocks[k]
-                link = blocks["L"] @ x_s + blocks["BP"] @ columns[k]
-                r = -link[body.position[k], 0]
-                if "CtP" in blocks:
-                    r = r + (blocks["CtP"] @ x_s + blocks["DtP"] @ columns[k])[:, 0]
+            rows, shares = body.apply_jacobian(
+                array[self.slices[name]], {k: masters[k] for k in body.layers}
+            )
+            out[self.slices[name]] = rows
+            for k, r in shares.items():
                 local[k] += r
         result = self.total(local)
         out[self.master_slice] = self.join_masters(

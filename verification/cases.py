@@ -33,8 +33,10 @@ __all__ = [
     "cathode_slot",
     "cathode_slot_scene",
     "heated_blocks",
+    "hot_squeezed_bars",
     "joule_bars",
     "squeezed_joule_bars",
+    "squeezed_row",
     "stack",
     "stack_scene",
     "steel_blocks_between_walls",
@@ -260,12 +262,12 @@ def steel_blocks_between_walls(
     return problem, exact
 
 
-def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
-    """Every field coupled: ``voltage`` across the bars, squeezed 20 µm between walls at 300 K.
+def _squeezed_laws() -> tuple[Material, Material, Contact]:
+    """A carbon-like and a steel-like material and their contact, every law of p and T.
 
-    Bar A is carbon-like (k(T) a law, σ(T) a table, both growing with T), bar B steel-like (σ(T)
-    a law, falling); thermal expansion; an exponential closure law; h(p, T) a power law times a
-    temperature factor; g(p, T) a table in p and T. The bottom slides on rollers.
+    Carbon: k(T) a law, σ(T) a table, both growing with T; steel: σ(T) a law, falling;
+    thermal expansion; an exponential closure law; h(p, T) a power law times a temperature
+    factor; g(p, T) a table in p and T.
     """
     h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
     carbon = Material(
@@ -293,6 +295,16 @@ def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
         ),
         normal=ExponentialClosure(stiffness=1e12, closure=2e-5),
     )
+    return carbon, steel, contact
+
+
+def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
+    """Every field coupled: ``voltage`` across the bars, squeezed 20 µm between walls at 300 K.
+
+    Bar A carbon-like, bar B steel-like, with the laws of :func:`_squeezed_laws`. The bottom
+    slides on rollers.
+    """
+    carbon, steel, contact = _squeezed_laws()
     return Problem(
         scene,
         {"plate_A": carbon, "plate_B": steel},
@@ -390,3 +402,80 @@ def cathode_slot(scene: Scene, *, mechanics: bool = True, voltage: float = 0.05)
         if dim == 3:
             conditions += [Displacement("front", 2, 0.0), Displacement("back", 2, 0.0)]
     return Problem(scene, materials, contacts, conditions)
+
+
+def hot_squeezed_bars(scene: Scene) -> Problem:
+    """Temperature and displacement, a linear bulk and contact laws of pressure and temperature.
+
+    The bars of :func:`bars_scene` as steel (constant k, E, α: the bulk's Jacobian does not
+    change), squeezed 20 µm between walls at 300 K and 350 K; the contact closes by an
+    exponential law (stiffening by e every 0.1 mm) and conducts
+    h(p, T) = PowerLaw(p) (1 + 1e-3 (T − 300)). Only the contact blocks change from one Newton
+    step to the next.
+    """
+    steel = Material(
+        conductivity=45.0, young=2e11, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
+    )
+    h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
+    contact = Contact(
+        conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
+        normal=ExponentialClosure(stiffness=1e12, closure=1e-4),
+    )
+    return Problem(
+        scene,
+        {"plate_A": steel, "plate_B": steel},
+        {"contact": contact},
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 350.0),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, -2e-5),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )
+
+
+def blocks_row_scene(
+    count: int = 4,
+    size: float = 0.1,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "shared",
+) -> Scene:
+    """``geo/blocks_row3d.geo``: ``count`` blocks of 0.5 × 0.2 × 0.2 m in a row, tetrahedra."""
+    return load_scene(
+        GEO / "blocks_row3d.geo",
+        bodies=[f"block_{i}" for i in range(count)],
+        interfaces=[f"contact_{i}" for i in range(count - 1)],
+        parameters={"count": count, "size": size},
+        comm=comm,
+        placement=placement,
+    )
+
+
+def squeezed_row(scene: Scene, *, voltage: float = 0.5) -> Problem:
+    """Every field through a row of blocks, the inner ones floating in T, φ and u_x.
+
+    The materials and contact laws of :func:`squeezed_joule_bars` (carbon-like and steel-like
+    blocks in turn; h(p, T), g(p, T), an exponential closure), ``voltage`` [V] and 300 K at
+    x = 0, 0 V and 320 K at the far end, the far end pushed in by 20 µm per contact, rollers on
+    y = 0 and z = 0. Only the first and the last block carry conditions in T, φ and u_x.
+    """
+    count = len(scene.bodies)
+    carbon, steel, contact = _squeezed_laws()
+    materials = {f"block_{i}": (carbon if i % 2 == 0 else steel) for i in range(count)}
+    return Problem(
+        scene,
+        materials,
+        {f"contact_{i}": contact for i in range(count - 1)},
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 320.0),
+            Potential("left", voltage),
+            Potential("right", 0.0),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, -2e-5 * (count - 1)),
+            Displacement("front", 1, 0.0),
+            Displacement("bottom", 2, 0.0),
+        ],
+    )
