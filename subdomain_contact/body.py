@@ -256,15 +256,14 @@ class Body:
         self.scale = 1.0 / np.sqrt(np.where(magnitude > 0, magnitude, 1.0))
         D = self.A_bulk.createVecLeft()
         D.array[:] = self.scale
-        zero = np.zeros((len(self.kept_local),) * 2)
-        if self.factor is None:
+        if self.factor is None:  # the contact's block follows in :meth:`factorise`
             self._scaled = self.A_bulk.copy()
             self._scaled.diagonalScale(D, D)
-            self.factor = CondensedFactor(self._scaled, self.kept_local, zero, self.prefix)
+            self.factor = CondensedFactor(self._scaled, self.kept_local, None, self.prefix)
         else:  # the same sparsity: MUMPS keeps its analysis (ordering, symbolic phase)
             self.A_bulk.copy(self._scaled, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             self._scaled.diagonalScale(D, D)
-            self.factor.refactor(self._scaled, zero)
+            self.factor.refactor(self._scaled, None)
         d = self.scale[self.kept_local]
         self.sigma = self.factor.sigma / d[:, None] / d[None, :]
         D.destroy()

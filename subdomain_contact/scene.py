@@ -379,7 +379,13 @@ def _check_conforming(path: Path, interface: Interface, bodies: Mapping[str, Bod
         fdim = body.mesh.topology.dim - 1
         facets = body.facet_tags.find(interface.tag)
         vertices = dolfinx.mesh.compute_incident_entities(body.mesh.topology, facets, fdim, 0)
-        vertices = vertices[vertices < body.mesh.topology.index_map(0).size_local]
+        # A rank may own a vertex of the group without holding any of its facets: owners learn
+        # from the ranks that hold them.
+        vertex_map = body.mesh.topology.index_map(0)
+        marker = dolfinx.la.vector(vertex_map, dtype=np.int32)
+        marker.array[vertices] = 1
+        marker.scatter_reverse(dolfinx.la.InsertMode.add)
+        vertices = np.flatnonzero(marker.array[: vertex_map.size_local]).astype(np.int32)
         body.mesh.topology.create_connectivity(0, fdim + 1)
         nodes = dolfinx.mesh.entities_to_geometry(body.mesh, 0, vertices).ravel()
         side = gather_rows(body.mesh.comm, body.mesh.geometry.x[nodes])

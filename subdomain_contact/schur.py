@@ -62,7 +62,7 @@ class CondensedFactor:
     Args:
         K: Square matrix on a communicator of one rank.
         kept: Local indices of the kept rows (the order of ``sigma``'s rows and columns).
-        added: ``H``, dense on the kept rows.
+        added: ``H``, dense on the kept rows (None: call :meth:`update` before solving).
         prefix: PETSc options prefix of the factorisation (``-<prefix>mat_mumps_icntl_*``).
 
     Attributes:
@@ -73,7 +73,7 @@ class CondensedFactor:
         self,
         K: PETSc.Mat,
         kept: npt.NDArray[np.int32],
-        added: Matrix,
+        added: Matrix | None,
         prefix: str,
     ) -> None:
         if K.getComm().getSize() != 1:
@@ -82,7 +82,8 @@ class CondensedFactor:
         self.kept = np.asarray(kept, dtype=PETSc.IntType)
         self.pc: PETSc.PC | None = None
         self._build(K)
-        self.update(added)
+        if added is not None:
+            self.update(added)
 
     def _build(self, K: PETSc.Mat) -> None:
         """A MUMPS LU of K with the Schur rows set, factorised.
@@ -117,15 +118,19 @@ class CondensedFactor:
             raise RuntimeError(f"{self.prefix}: factorisation failed (PETSc reason {reason})")
         self.sigma = self._write_block(None)
 
-    def refactor(self, K: PETSc.Mat, added: Matrix) -> None:
-        """Factorise new values of the same sparsity pattern (MUMPS's analysis is kept)."""
+    def refactor(self, K: PETSc.Mat, added: Matrix | None) -> None:
+        """Factorise new values of the same sparsity pattern (MUMPS's analysis is kept).
+
+        Solves need :meth:`update` next when ``added`` is None.
+        """
         self.pc.setOperators(K)
         self.pc.setUp()
         if self.pc.getFailedReason() != 0:  # the workspace estimate fell short: start again
             self._build(K)
         else:
             self.sigma = self._write_block(None)
-        self.update(added)
+        if added is not None:
+            self.update(added)
 
     def update(self, added: Matrix) -> None:
         """Make the dense block ``Σ + added`` and factorise it: solves are then with ``K + H``."""

@@ -273,6 +273,16 @@ class System:
         totals = self.comm.allreduce(squares, op=MPI.SUM)
         return {n: float(np.sqrt(s)) for n, s in zip(self.problem.fields, totals, strict=True)}
 
+    def field_max_norms(self, f: PETSc.Vec) -> dict[str, float]:
+        """∞-norm of each field's part of global vector ``f`` (collective)."""
+        local = np.array(
+            [np.abs(f.array_r[self.field_of == FIELDS.index(n)]).max(initial=0.0)
+             for n in self.problem.fields]
+        )  # fmt: skip
+        totals = np.empty_like(local)  # the buffer form: MPI.MAX on pickled arrays is ambiguous
+        self.comm.Allreduce(local, totals, op=MPI.MAX)
+        return {n: float(v) for n, v in zip(self.problem.fields, totals, strict=True)}
+
     def master_field_norms(self, masters: Mapping[str, Vector]) -> dict[str, float]:
         """2-norm of each field's part of replicated master vectors (active DOFs)."""
         norms = dict.fromkeys(self.problem.fields, 0.0)

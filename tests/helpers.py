@@ -1,5 +1,8 @@
 """Solves used across the tests: the subdomain iteration as a linear solver, and Newton."""
 
+import numpy as np
+import scipy.linalg
+
 import subdomain_contact as sc
 
 #: Systems the helpers made during the current test, destroyed after it (conftest).
@@ -54,3 +57,17 @@ def monolithic(system):
     result = sc.solve(system, sc.Monolithic())
     assert result.iterations >= 1
     return result
+
+
+def preconditioned_condition(problem, *, coarse: bool) -> float:
+    """κ(P S) of the interface problem: S and its preconditioner P formed column by column."""
+    with sc.System(problem) as system:
+        system.reset()
+        system.assemble_jacobian()
+        solver = sc.Subdomains(krylov=True, coarse=coarse)
+        solver.setup(system)
+        unit = np.eye(solver.size)
+        S = np.column_stack([solver.apply(e) for e in unit])
+        P = np.column_stack([solver.precondition(e) for e in unit])
+    eigenvalues = scipy.linalg.eigvalsh(0.5 * (S + S.T), np.linalg.inv(0.5 * (P + P.T)))
+    return float(eigenvalues.max() / eigenvalues.min())

@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-import scipy.linalg
-from helpers import linear_solve, monolithic, snapshot
+from helpers import linear_solve, monolithic, preconditioned_condition, snapshot
 from mpi4py import MPI
 
 import subdomain_contact as sc
@@ -95,20 +94,6 @@ def test_matrix_free_equals_dense(chain):
     assert free.krylov_iterations == dense.krylov_iterations
     for k, values in dense_system.masters.items():
         assert np.allclose(free_system.masters[k], values, rtol=1e-10, atol=1e-12)
-
-
-def preconditioned_condition(problem, *, coarse: bool) -> float:
-    """κ(P S) of the interface problem: S and its preconditioner P formed column by column."""
-    with sc.System(problem) as system:
-        system.reset()
-        system.assemble_jacobian()
-        solver = sc.Subdomains(krylov=True, coarse=coarse)
-        solver.setup(system)
-        unit = np.eye(solver.size)
-        S = np.column_stack([solver.apply(e) for e in unit])
-        P = np.column_stack([solver.precondition(e) for e in unit])
-    eigenvalues = scipy.linalg.eigvalsh(0.5 * (S + S.T), np.linalg.inv(0.5 * (P + P.T)))
-    return float(eigenvalues.max() / eigenvalues.min())
 
 
 def test_coarse_space_keeps_a_long_floating_chain_fast(comm):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,7 +122,7 @@ class BlocksBetweenWalls:
     (ε_zz = 0), ε_xx = −p/E + α ΔT in 3D (``plane_strain=False``). The
     contact between the blocks has an initial gap and a penalty law p = k_n ⟨closure − gap⟩;
     an open contact keeps the tension stiffness ``open_stiffness`` k_n (see
-    :class:`~subdomain_contact.multiphysics.Contact`). Units: m, Pa, 1/K, K, Pa/m.
+    :class:`~subdomain_contact.physics.Contact`). Units: m, Pa, 1/K, K, Pa/m.
     """
 
     lengths: tuple[float, float]
@@ -150,6 +151,22 @@ class BlocksBetweenWalls:
     def pressure(self, heating: float) -> float:
         """Contact pressure [Pa] (0 when open)."""
         return max(self._traction(heating, self.stiffness), 0.0)
+
+    def strain(self, heating: float) -> tuple[float, float]:
+        """ε_xx of each block under the contact's traction (compressive: negative stress)."""
+        p = self._traction(heating, self.stiffness)
+        if p < 0:
+            p = self._traction(heating, self.open_stiffness * self.stiffness)
+        return tuple(
+            -p * (1 - nu**2 if self.plane_strain else 1.0) / E
+            + (1 + nu if self.plane_strain else 1.0) * a * heating
+            for nu, E, a in zip(self.poisson, self.young, self.expansion, strict=True)
+        )
+
+    def displacement_x(self, heating: float) -> tuple[Callable, Callable]:
+        """u_x [m] of each block as a function of x: the walls at 0 and L_a + L_b hold u_x = 0."""
+        (e_a, e_b), end = self.strain(heating), sum(self.lengths)
+        return (lambda x: e_a * x), (lambda x: -e_b * (end - x))
 
     def gap_width(self, heating: float) -> float:
         """Gap [m] between the blocks (negative: the penalty's interpenetration)."""

@@ -235,12 +235,12 @@ def joule_bars(
 
 
 def steel_blocks_between_walls(
-    scene: Scene, temperature: float, *, gap: float = 1e-4
+    scene: Scene, temperature: float, *, gap: float = 1e-4, penalty: float = 1e13
 ) -> tuple[Problem, BlocksBetweenWalls]:
     """The bars of :func:`bars_scene` as steel blocks between fixed walls, heated uniformly.
 
     Both walls at ``temperature`` [K] (reference 300 K), u_x = 0 at the walls, rollers at the
-    bottom, an initial ``gap`` [m] closed by a penalty of 1e13 Pa/m. Returns the problem and
+    bottom, an initial ``gap`` [m] closed by a ``penalty`` [Pa/m]. Returns the problem and
     its closed form (plane strain).
     """
     steel = Material(
@@ -249,7 +249,7 @@ def steel_blocks_between_walls(
     problem = Problem(
         scene,
         {"plate_A": steel, "plate_B": steel},
-        {"contact": Contact(conductance=1e4, normal=Penalty(1e13), gap=gap)},
+        {"contact": Contact(conductance=1e4, normal=Penalty(penalty), gap=gap)},
         [
             Temperature("left", temperature),
             Temperature("right", temperature),
@@ -258,7 +258,7 @@ def steel_blocks_between_walls(
             Displacement("bottom", 1, 0.0),
         ],
     )
-    exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, gap, 1e13)
+    exact = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, gap, penalty)
     return problem, exact
 
 
