@@ -28,7 +28,7 @@ from verification.cases import blocks_row_scene, squeezed_row
 from verification.nodal import NodalReference, error_against, field_values
 
 parser = argparse.ArgumentParser(description=__doc__)
-parser.add_argument("--sizes", type=float, nargs="+", default=[0.05, 0.025, 0.0125])
+parser.add_argument("--sizes", type=float, nargs="+", default=[0.05, 0.025, 0.012])
 parser.add_argument("--count", type=int, default=4, help="number of blocks")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD

@@ -93,6 +93,7 @@ class Body:
             k: slave_map(self.forms, layer, body.facet_tags) for k, layer in layers.items()
         }
         self._index_contact_dofs(contact_dofs(self.forms, body.facet_tags, list(layers)))
+        self._index_fields()
         self._compile()
         self.schur = schur and self.comm.size == 1 and len(self.kept) > 0
         self.factor: CondensedFactor | None = None
@@ -269,24 +270,27 @@ class Body:
         D.destroy()
         self.factorisations += 1
 
+    def _index_fields(self) -> None:
+        """The field of every owned DOF and of every contact DOF (once: it is structure)."""
+        field_of = np.zeros(self.size, dtype=np.int32)
+        for f, name in enumerate(self.forms.fields):
+            dofs = self.forms.collapsed(name)[1]
+            field_of[dofs[dofs < self.size]] = f
+        count = len(self.forms.fields)
+        self._field_dofs = [np.flatnonzero(field_of == f) for f in range(count)]
+        kept_field = self._gather_kept(field_of[self.kept_local].astype(float)).astype(int)
+        self._kept_field = kept_field
+        self._kept_field_dofs = [np.flatnonzero(kept_field == f) for f in range(count)]
+
     def _bulk_norms_by_field(self) -> None:
         """The bulk matrix's largest row sum on the rows of each field (on every rank)."""
         indptr, _, data = self.A_bulk.getValuesCSR()
         rows = np.add.reduceat(np.abs(data), indptr[:-1]) if data.size else np.zeros(0)
         rows[indptr[:-1] == indptr[1:]] = 0.0
-        field_of = np.zeros(self.size, dtype=np.int32)
-        for f, name in enumerate(self.forms.fields):
-            dofs = self.forms.collapsed(name)[1]
-            field_of[dofs[dofs < self.size]] = f
-        bulk = np.zeros(len(self.forms.fields))
-        np.maximum.at(bulk, field_of, rows)
+        bulk = np.array([rows[dofs].max(initial=0.0) for dofs in self._field_dofs])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, bulk, op=MPI.MAX)
         self._bulk_norms = bulk
-        self._field_dofs = [np.flatnonzero(field_of == f) for f in range(len(bulk))]
-        kept_field = self._gather_kept(field_of[self.kept_local].astype(float)).astype(int)
-        self._kept_field = kept_field
-        self._kept_field_dofs = [np.flatnonzero(kept_field == f) for f in range(len(bulk))]
 
     def _soft_or_fixed(self) -> dict[str, npt.NDArray[np.bool_]]:
         """Per master DOF of each interface: take the link form (soft link or fixed slave).

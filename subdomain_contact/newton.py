@@ -259,8 +259,11 @@ def solve(
     Converged when every field's residual is below ``rtol`` times its scale: the larger of
     its initial residual and of its residual at the *cold state* (every unknown zero but the
     Dirichlet values), which measures the loads the field can see. (Not the iterates': an
-    iterate that overshoots would otherwise loosen the test.) A linear problem is
-    solved in one step, its inner solve to ``rtol``.
+    iterate that overshoots would otherwise loosen the test.) Also converged when a full
+    step whose inner solve converged moved every field by at most :data:`STEP_RTOL` of its
+    largest value: a stiff contact floors the residual at about h̄ ε |T|, and the step
+    then measures the digits left. A linear problem is solved in one step, its inner
+    solve to ``rtol``.
 
     Args:
         system: The system; its state is the initial guess and receives the solution.

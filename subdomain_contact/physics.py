@@ -395,6 +395,7 @@ class BodyForms:
     contact: dict[str, dict[str, Expr]]
     ds: ufl.Measure
     tags: dict[str, int]
+    _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
         """The sub-space of one field (or of one displacement component)."""
@@ -404,13 +405,20 @@ class BodyForms:
     def collapsed(
         self, name: str, component: int | None = None
     ) -> tuple[dolfinx.fem.FunctionSpace, npt.NDArray[np.int32]]:
-        """The sub-space as a space of its own, and the index in ``W`` of each of its DOFs."""
-        V = self.subspace(name, component)
-        if V is self.W:
-            size = self.W.dofmap.index_map.size_local + self.W.dofmap.index_map.num_ghosts
-            return self.W, np.arange(size * self.W.dofmap.index_map_bs, dtype=np.int32)
-        collapsed, to_parent = V.collapse()
-        return collapsed, np.asarray(to_parent[0])
+        """The sub-space as a space of its own, and the index in ``W`` of each of its DOFs.
+
+        Made once per field (and component), then reused: the caller must not modify it.
+        """
+        if (name, component) not in self._collapsed:
+            V = self.subspace(name, component)
+            if V is self.W:
+                size = self.W.dofmap.index_map.size_local + self.W.dofmap.index_map.num_ghosts
+                parent_of = np.arange(size * self.W.dofmap.index_map_bs, dtype=np.int32)
+                self._collapsed[name, component] = (self.W, parent_of)
+            else:
+                collapsed, to_parent = V.collapse()
+                self._collapsed[name, component] = (collapsed, np.asarray(to_parent[0]))
+        return self._collapsed[name, component]
 
 
 def _split(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:

@@ -90,10 +90,13 @@ def test_matrix_free_equals_dense(chain):
     free_system, free = linear_solve(problem, dense_limit=0)
     assert dense.applications == 0 and free.applications > 0
     # the same operator to round-off: the same CG, whose answers differ by round-off
-    # amplified by the interface problem's condition (masters are O(1) K)
+    # amplified by the interface problem's condition
     assert free.krylov_iterations == dense.krylov_iterations
-    for k, values in dense_system.masters.items():
-        assert np.allclose(free_system.masters[k], values, rtol=1e-10, atol=1e-12)
+    difference = max(
+        np.abs(free_system.masters[k] - values).max() / np.abs(values).max()
+        for k, values in dense_system.masters.items()
+    )
+    assert difference < 1e-10  # measured 9.8e-15 (4.9e-15 on 2 ranks): 1e4 of margin
 
 
 def test_coarse_space_keeps_a_long_floating_chain_fast(comm):
