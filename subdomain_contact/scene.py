@@ -140,8 +140,9 @@ def load_scene(
             layers; a group distributes only its own bodies.
 
     Raises:
-        ValueError: Unknown parameter, missing group, empty or non-conforming interface, or a
-            file gmsh cannot mesh; the message names the file and the group.
+        ValueError: Unknown parameter, missing or overlapping group, empty or
+            non-conforming interface, bodies that touch with no interface listed between
+            them, or a file gmsh cannot mesh; the message names the file and the group.
     """
     path = Path(path)
     if placement == "groups" and comm.size > 1:
@@ -181,6 +182,10 @@ def load_scene(
             path, parent, data.facet_tags, name, groups[name].tag, list(bodies), body_of_cell
         )
         _check_conforming(path, scene_interfaces[name], scene_bodies)
+    _check_touching(
+        path, parent, data.facet_tags, [groups[i].tag for i in interfaces], list(bodies),
+        body_of_cell,
+    )  # fmt: skip
     owner = dict.fromkeys(scene_bodies, 0)
     return Scene(path, comm, scene_bodies, scene_interfaces, owner, 0, comm, (0,))
 
@@ -268,7 +273,7 @@ def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfi
             gmsh.model.mesh.generate(dim)
             if dim < 2 or not gmsh.model.getPhysicalGroups(dim):
                 error = f"{path}: no {dim}D physical group: name the bodies with Physical groups"
-            error = error or _stray_facet_group(path, dim)
+            error = error or _stray_facet_group(path, dim) or _overlapping_groups(path, dim)
         except Exception as exc:
             error = f"{path}: gmsh could not mesh the file: {exc}"
     error, dim = comm.bcast((error, dim), root=0)
@@ -293,6 +298,22 @@ def _stray_facet_group(path: Path, dim: int) -> str | None:
                 return (
                     f"{path}: physical group '{name}' has no facets on any body "
                     f"(its entity {entity} bounds no {dim}D entity)"
+                )
+    return None
+
+
+def _overlapping_groups(path: Path, dim: int) -> str | None:
+    """Two cell groups sharing an entity: a cell can carry one tag only, one group loses it."""
+    seen: dict[int, str] = {}
+    for _, group in gmsh.model.getPhysicalGroups(dim):
+        name = gmsh.model.getPhysicalName(dim, group)
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, group):
+            other = seen.setdefault(int(entity), name)
+            if other != name:
+                kind = "surface" if dim == 2 else "volume"
+                return (
+                    f"{path}: physical groups '{other}' and '{name}' share {kind} {entity}: "
+                    "a cell belongs to one group only (make the groups disjoint)"
                 )
     return None
 
@@ -369,6 +390,61 @@ def _make_interface(
     on_first = np.flatnonzero(marker.array[: facet_map.size_local]).astype(np.int32)
     master, *_ = dolfinx.mesh.create_submesh(parent, tdim - 1, on_first)
     return Interface(name, (bodies[first], bodies[second]), tag, master)
+
+
+def _check_touching(
+    path: Path,
+    parent: dolfinx.mesh.Mesh,
+    facet_tags: dolfinx.mesh.MeshTags,
+    interface_tags: list[int],
+    bodies: list[str],
+    body_of_cell: npt.NDArray[np.int32],
+) -> None:
+    """Two bodies that share facets must have an interface there (else: solved as apart)."""
+    tdim = parent.topology.dim
+    parent.topology.create_connectivity(tdim - 1, tdim)
+    f2c = parent.topology.connectivity(tdim - 1, tdim)
+    facet_map = parent.topology.index_map(tdim - 1)
+    local = facet_map.size_local + facet_map.num_ghosts
+    cells = f2c.array[: f2c.offsets[local]]
+    facet_of_link = np.repeat(np.arange(local), np.diff(f2c.offsets[: local + 1]))
+    label = body_of_cell[cells] + 1.0  # 0 where the cell is in no body
+    inside = label > 0
+    # per facet: how many body cells, and the sums of x and x² of their labels x (the ranks
+    # that see a facet's cells add theirs); two labels x ≠ y iff 2(x² + y²) − (x + y)² > 0
+    sums = []
+    for values in (np.ones_like(label), label, label**2):
+        vector = dolfinx.la.vector(facet_map, dtype=np.float64)
+        np.add.at(vector.array, facet_of_link[inside], values[inside])
+        vector.scatter_reverse(dolfinx.la.InsertMode.add)
+        sums.append(vector.array[: facet_map.size_local].copy())
+    count, first, second = sums
+    tagged = dolfinx.la.vector(facet_map, dtype=np.float64)
+    tagged.array[facet_tags.indices[np.isin(facet_tags.values, interface_tags)]] = 1.0
+    tagged.scatter_reverse(dolfinx.la.InsertMode.add)
+    spread = np.sqrt(np.maximum(2.0 * second - first**2, 0.0))
+    touching = np.flatnonzero(
+        (count == 2) & (spread > 0.5) & (tagged.array[: facet_map.size_local] == 0)
+    )
+    total = parent.comm.allreduce(len(touching), op=MPI.SUM)
+    if total == 0:
+        return
+    found = None
+    if len(touching):
+        f = touching[0]
+        a, b = (
+            round((first[f] - spread[f]) / 2) - 1,
+            round((first[f] + spread[f]) / 2) - 1,
+        )
+        where = dolfinx.mesh.compute_midpoints(parent, tdim - 1, touching[:1].astype(np.int32))[0]
+        found = (bodies[a], bodies[b], where)
+    a, b, where = next(item for item in parent.comm.allgather(found) if item is not None)
+    raise ValueError(
+        f"{path}: bodies '{a}' and '{b}' touch ({total} facets, one at "
+        f"{np.array2string(where, precision=4)}) with no interface between them: name their "
+        "common boundary with a physical group and list it in interfaces= (or merge the two "
+        "bodies into one group)"
+    )
 
 
 def _check_conforming(path: Path, interface: Interface, bodies: Mapping[str, Body]) -> None:

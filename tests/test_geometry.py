@@ -63,6 +63,10 @@ def test_interface_drawn_twice_is_accepted_when_conforming(comm):
         ),
         ({"stray": 1}, r"split_plates.geo: physical group 'stray' has no facets on any body"),
         ({"rowz": 3}, r"split_plates.geo: parameter 'rowz' does not appear in the file"),
+        (
+            {"overlap": 1},
+            r"split_plates.geo: physical groups 'left_plate' and 'both' share surface 1",
+        ),
     ],
 )
 def test_bad_interfaces_are_refused(parameters, message):
@@ -78,6 +82,11 @@ def test_bad_interfaces_are_refused(parameters, message):
         (["plate_A", "plate_B"], ["left"], r"interface 'left' must lie between exactly two"),
         (["plate_A", "contact"], [], r"group 'contact' has dimension 1, expected 2"),
         (["plate_A"], ["contact"], r"interface 'contact' touches a cell group that is not a body"),
+        (
+            ["plate_A", "plate_B"],
+            [],
+            r"two_plates.geo: bodies 'plate_A' and 'plate_B' touch \(4 facets, one at \[1\. ",
+        ),
     ],
 )
 def test_missing_or_wrong_groups_are_refused(bodies, interfaces, message):

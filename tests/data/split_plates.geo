@@ -1,9 +1,11 @@
 // Two plates whose common side is drawn twice (one curve per plate), for the loader's checks.
 // rows_b = rows: conforming (the two curves carry the same nodes); otherwise non-conforming.
 // with stray = 1, group "stray" is a curve outside both plates: an interface group with no facets.
+// with overlap = 1, group "both" holds both plates' surfaces: it overlaps the body groups.
 DefineConstant[ rows = 4 ];
 DefineConstant[ rows_b = 4 ];
 DefineConstant[ stray = 0 ];
+DefineConstant[ overlap = 0 ];
 DefineConstant[ grading_b = 1 ];  // != 1: same node count, shifted nodes
 Point(1) = {0, 0, 0};
 Point(2) = {1, 0, 0};
@@ -31,4 +33,7 @@ Physical Curve("right") = {6};
 If (stray)
   Line(9) = {9, 10};
   Physical Curve("stray") = {9};
+EndIf
+If (overlap)
+  Physical Surface("both") = {1, 2};
 EndIf
