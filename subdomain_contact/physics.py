@@ -150,12 +150,17 @@ class Contact:
     open_stiffness: float = 1e-9
 
 
+#: Dirichlet data: a number, or a function of the points ``x`` (shape ``(3, n)``, m) that
+#: returns the ``n`` values (dolfinx's interpolation convention).
+Data = float | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+
+
 @dataclass(frozen=True)
 class Temperature:
-    """Dirichlet condition: temperature [K] on a boundary group."""
+    """Dirichlet condition: temperature [K] on a boundary group (a number or a function of x)."""
 
     boundary: str
-    value: float
+    value: Data
 
 
 @dataclass(frozen=True)
@@ -177,10 +182,10 @@ class Convection:
 
 @dataclass(frozen=True)
 class Potential:
-    """Dirichlet condition: electric potential [V] on a boundary group."""
+    """Dirichlet condition: electric potential [V] on a boundary group (number or function)."""
 
     boundary: str
-    value: float
+    value: Data
 
 
 @dataclass(frozen=True)
@@ -193,11 +198,14 @@ class CurrentDensity:
 
 @dataclass(frozen=True)
 class Displacement:
-    """Dirichlet condition on one displacement component (0: x, 1: y, 2: z) [m]."""
+    """Dirichlet condition on one displacement component (0: x, 1: y, 2: z) [m].
+
+    ``value``: a number or a function of x, as for :class:`Temperature`.
+    """
 
     boundary: str
     component: int
-    value: float
+    value: Data
 
 
 Condition = Temperature | HeatFlux | Convection | Potential | CurrentDensity | Displacement
@@ -316,8 +324,15 @@ class Problem:
                     f"{FIELD_OF[type(bc)]} field, which no material defines"
                 )
             for attr in ("value", "coefficient", "ambient"):
-                if hasattr(bc, attr):
+                if hasattr(bc, attr) and not callable(getattr(bc, attr)):
                     check_finite(getattr(bc, attr), f"boundary '{bc.boundary}': {attr}")
+            if callable(getattr(bc, "value", None)) and not isinstance(
+                bc, Temperature | Potential | Displacement
+            ):
+                raise ValueError(
+                    f"boundary '{bc.boundary}': {type(bc).__name__} takes a number; "
+                    "functions of x are for Temperature, Potential and Displacement"
+                )
             if isinstance(bc, Convection) and bc.coefficient < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
             if isinstance(bc, Displacement) and bc.component not in range(dim):
@@ -581,6 +596,29 @@ def _dirichlet(
         if isinstance(bc, Displacement):
             V = V.sub(bc.component)
         facets = body.facet_tags.find(body.boundaries[bc.boundary])
-        dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
-        bcs.append(dolfinx.fem.dirichletbc(np.float64(bc.value), dofs, V))
+        if not callable(bc.value):
+            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+            bcs.append(dolfinx.fem.dirichletbc(np.float64(bc.value), dofs, V))
+            continue
+        Vc = V if V is W else V.collapse()[0]
+        data = dolfinx.fem.Function(Vc)
+        data.interpolate(bc.value)
+        if V is W:
+            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+            where, values = dofs, data.x.array[dofs]
+            bcs.append(dolfinx.fem.dirichletbc(data, dofs))
+        else:
+            dofs = dolfinx.fem.locate_dofs_topological((V, Vc), fdim, facets)
+            where, values = dofs[1], data.x.array[dofs[1]]
+            bcs.append(dolfinx.fem.dirichletbc(data, dofs, V))
+        bad = ~np.isfinite(values)
+        first = (
+            (values[bad][0], Vc.tabulate_dof_coordinates()[where[bad][0]]) if bad.any() else None
+        )
+        found = [item for item in body.mesh.comm.allgather(first) if item is not None]
+        if found:  # on every rank of the body
+            raise ValueError(
+                f"{problem.scene.source}: boundary '{bc.boundary}' of body '{body.name}': "
+                f"{type(bc).__name__} data = {found[0][0]} at x = {found[0][1]}: must be finite"
+            )
     return bcs
