@@ -377,9 +377,9 @@ class Body:
         rows = out.array.copy()
         rows[self.kept_local] += kept[self.kept_slice]
         shares = {}
-        for k in self.layers:
+        for k, rows_k in self._rows.items():  # the link's own blocks on its slave rows
             blocks = self.blocks[k]
-            r = -(blocks["L"] @ x_s + blocks["BP"] @ columns[k])[self.position[k], 0]
+            r = -(rows_k["L"][k] @ x_s + rows_k["BP"][k] @ columns[k])[:, 0]
             if "CtP" in blocks:
                 r = r + (blocks["CtP"] @ x_s + blocks["DtP"] @ columns[k])[:, 0]
             shares[k] = r

@@ -363,16 +363,12 @@ def _make_interface(
 ) -> Interface:
     """Find the two bodies on either side of a facet group and build its master mesh."""
     tdim = parent.topology.dim
-    parent.topology.create_connectivity(tdim - 1, tdim)
-    f2c = parent.topology.connectivity(tdim - 1, tdim)
     facets = facet_tags.find(tag)  # local, ghosts included: a rank may see only one side
     num_owned = int(np.count_nonzero(facets < parent.topology.index_map(tdim - 1).size_local))
     if parent.comm.allreduce(num_owned, op=MPI.SUM) == 0:
         raise ValueError(f"{path}: interface '{name}' has no facets")
-    counts = f2c.offsets[facets + 1] - f2c.offsets[facets]
-    starts = np.repeat(f2c.offsets[facets], counts)
-    within = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    side = body_of_cell[f2c.array[starts + within]]  # body index of each (facet, cell) link
+    linked, cells = _facet_cell_links(parent, facets)
+    side = body_of_cell[cells]  # body index of each (facet, cell) link
     touched = set().union(*parent.comm.allgather(set(side.tolist())))
     if -1 in touched:
         raise ValueError(f"{path}: interface '{name}' touches a cell group that is not a body")
@@ -383,13 +379,36 @@ def _make_interface(
         )
     first, second = sorted(touched)
     # The master mesh copies the first body's side (the whole group when facets are shared).
-    facet_map = parent.topology.index_map(tdim - 1)
-    marker = dolfinx.la.vector(facet_map, dtype=np.int32)  # cells of `first` seen per facet
-    np.add.at(marker.array, np.repeat(facets, counts)[side == first], 1)
-    marker.scatter_reverse(dolfinx.la.InsertMode.add)  # owners learn what ghosts saw
-    on_first = np.flatnonzero(marker.array[: facet_map.size_local]).astype(np.int32)
+    on_side = linked[side == first]  # cells of `first` seen per facet, summed on its owner
+    seen = _summed_on_owners(parent.topology.index_map(tdim - 1), on_side, np.ones(len(on_side)))
+    on_first = np.flatnonzero(seen).astype(np.int32)
     master, *_ = dolfinx.mesh.create_submesh(parent, tdim - 1, on_first)
     return Interface(name, (bodies[first], bodies[second]), tag, master)
+
+
+def _facet_cell_links(
+    mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32]
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """Every (facet, cell) pair of the given local facets: the facet and the cell of each."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    counts = f2c.offsets[facets + 1] - f2c.offsets[facets]
+    starts = np.repeat(f2c.offsets[facets], counts)
+    within = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(facets, counts), f2c.array[starts + within]
+
+
+def _summed_on_owners(
+    index_map: dolfinx.common.IndexMap,
+    entities: npt.NDArray[np.int32],
+    values: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """Per owned entity, the sum of ``values`` added at local ``entities`` on every rank."""
+    vector = dolfinx.la.vector(index_map, dtype=np.float64)
+    np.add.at(vector.array, entities, values)
+    vector.scatter_reverse(dolfinx.la.InsertMode.add)  # owners learn what ghosts saw
+    return vector.array[: index_map.size_local].copy()
 
 
 def _check_touching(
@@ -402,30 +421,21 @@ def _check_touching(
 ) -> None:
     """Two bodies that share facets must have an interface there (else: solved as apart)."""
     tdim = parent.topology.dim
-    parent.topology.create_connectivity(tdim - 1, tdim)
-    f2c = parent.topology.connectivity(tdim - 1, tdim)
     facet_map = parent.topology.index_map(tdim - 1)
-    local = facet_map.size_local + facet_map.num_ghosts
-    cells = f2c.array[: f2c.offsets[local]]
-    facet_of_link = np.repeat(np.arange(local), np.diff(f2c.offsets[: local + 1]))
+    local = np.arange(facet_map.size_local + facet_map.num_ghosts, dtype=np.int32)
+    linked, cells = _facet_cell_links(parent, local)
     label = body_of_cell[cells] + 1.0  # 0 where the cell is in no body
     inside = label > 0
     # per facet: how many body cells, and the sums of x and x² of their labels x (the ranks
     # that see a facet's cells add theirs); two labels x ≠ y iff 2(x² + y²) − (x + y)² > 0
-    sums = []
-    for values in (np.ones_like(label), label, label**2):
-        vector = dolfinx.la.vector(facet_map, dtype=np.float64)
-        np.add.at(vector.array, facet_of_link[inside], values[inside])
-        vector.scatter_reverse(dolfinx.la.InsertMode.add)
-        sums.append(vector.array[: facet_map.size_local].copy())
-    count, first, second = sums
-    tagged = dolfinx.la.vector(facet_map, dtype=np.float64)
-    tagged.array[facet_tags.indices[np.isin(facet_tags.values, interface_tags)]] = 1.0
-    tagged.scatter_reverse(dolfinx.la.InsertMode.add)
-    spread = np.sqrt(np.maximum(2.0 * second - first**2, 0.0))
-    touching = np.flatnonzero(
-        (count == 2) & (spread > 0.5) & (tagged.array[: facet_map.size_local] == 0)
+    count, first, second = (
+        _summed_on_owners(facet_map, linked[inside], values[inside])
+        for values in (np.ones_like(label), label, label**2)
     )
+    interface = facet_tags.indices[np.isin(facet_tags.values, interface_tags)]
+    tagged = _summed_on_owners(facet_map, interface, np.ones(len(interface)))
+    spread = np.sqrt(np.maximum(2.0 * second - first**2, 0.0))
+    touching = np.flatnonzero((count == 2) & (spread > 0.5) & (tagged == 0))
     total = parent.comm.allreduce(len(touching), op=MPI.SUM)
     if total == 0:
         return
@@ -457,11 +467,8 @@ def _check_conforming(path: Path, interface: Interface, bodies: Mapping[str, Bod
         vertices = dolfinx.mesh.compute_incident_entities(body.mesh.topology, facets, fdim, 0)
         # A rank may own a vertex of the group without holding any of its facets: owners learn
         # from the ranks that hold them.
-        vertex_map = body.mesh.topology.index_map(0)
-        marker = dolfinx.la.vector(vertex_map, dtype=np.int32)
-        marker.array[vertices] = 1
-        marker.scatter_reverse(dolfinx.la.InsertMode.add)
-        vertices = np.flatnonzero(marker.array[: vertex_map.size_local]).astype(np.int32)
+        seen = _summed_on_owners(body.mesh.topology.index_map(0), vertices, np.ones(len(vertices)))
+        vertices = np.flatnonzero(seen).astype(np.int32)
         body.mesh.topology.create_connectivity(0, fdim + 1)
         nodes = dolfinx.mesh.entities_to_geometry(body.mesh, 0, vertices).ravel()
         side = gather_rows(body.mesh.comm, body.mesh.geometry.x[nodes])

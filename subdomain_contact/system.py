@@ -267,20 +267,20 @@ class System:
 
     def field_norms(self, f: PETSc.Vec) -> dict[str, float]:
         """2-norm of each field's part of global vector ``f`` (collective)."""
-        squares = np.array(
-            [np.sum(f.array_r[self.field_of == FIELDS.index(n)] ** 2) for n in self.problem.fields]
-        )
-        totals = self.comm.allreduce(squares, op=MPI.SUM)
-        return {n: float(np.sqrt(s)) for n, s in zip(self.problem.fields, totals, strict=True)}
+        squares = self._by_field(f, lambda part: np.sum(part**2), MPI.SUM)
+        return {n: float(np.sqrt(v)) for n, v in squares.items()}
 
     def field_max_norms(self, f: PETSc.Vec) -> dict[str, float]:
         """∞-norm of each field's part of global vector ``f`` (collective)."""
-        local = np.array(
-            [np.abs(f.array_r[self.field_of == FIELDS.index(n)]).max(initial=0.0)
-             for n in self.problem.fields]
-        )  # fmt: skip
-        totals = np.empty_like(local)  # the buffer form: MPI.MAX on pickled arrays is ambiguous
-        self.comm.Allreduce(local, totals, op=MPI.MAX)
+        return self._by_field(f, lambda part: np.abs(part).max(initial=0.0), MPI.MAX)
+
+    def _by_field(self, f: PETSc.Vec, local, op: MPI.Op) -> dict[str, float]:
+        """``local`` of each field's owned part of ``f``, reduced over the ranks by ``op``."""
+        values = np.array(
+            [local(f.array_r[self.field_of == FIELDS.index(n)]) for n in self.problem.fields]
+        )
+        totals = np.empty_like(values)  # the buffer form: MPI.MAX on pickled arrays is ambiguous
+        self.comm.Allreduce(values, totals, op=op)
         return {n: float(v) for n, v in zip(self.problem.fields, totals, strict=True)}
 
     def master_field_norms(self, masters: Mapping[str, Vector]) -> dict[str, float]:
