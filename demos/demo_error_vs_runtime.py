@@ -150,6 +150,7 @@ def _status(key: str) -> float:
 
 
 rows: list[dict] = []  # one per (problem, size, method)
+readbacks: dict[str, dict] = {}  # the reference solve's integrals and balances, per size
 iterates: list[dict] = []  # one per iterate
 
 
@@ -318,6 +319,7 @@ def newton_methods(cells: tuple[int, int]) -> None:
         sc.solve(system, sc.Monolithic(), rtol=1e-13, max_it=40)
         reference = system.state()
         dofs = reference.getSize()
+        readbacks[f"joule_bars {dofs}"] = sc.summary(system)
     say(f"joule_bars: {dofs} DOFs (T, φ, u), {comm.size} rank(s)")
 
     def newton(make_linear):
@@ -542,6 +544,7 @@ if comm.rank == 0:
         "exponents": [
             {"problem": p, "method": m, "exponent": v} for (p, m), v in exponents.items()
         ],
+        "readback": readbacks,
         "seconds": time.perf_counter() - started,
     }
     (args.out / "report.json").write_text(json.dumps(report, indent=1))

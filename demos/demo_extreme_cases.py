@@ -42,6 +42,13 @@ comm = MPI.COMM_WORLD
 started = time.perf_counter()
 n = 4 if args.small else 16  # element layers and rows per plate
 rows: list[dict] = []
+#: The balances of the case being run (relative imbalance per conserved quantity).
+balances: dict[str, float] = {}
+
+
+def record_balance(system: sc.System) -> None:
+    """Keep the relative imbalance of heat, current and force of a solved system."""
+    balances.update({name: b["relative"] for name, b in sc.balance(system).items()})
 
 
 def say(*text: object) -> None:
@@ -51,6 +58,7 @@ def say(*text: object) -> None:
 
 def case(name: str, tolerance: float, solve) -> None:
     """Run ``solve() -> (error, iterations)``; record accurate, WRONG or refused (and why)."""
+    balances.clear()
     try:
         error, iterations = solve()
         verdict = "accurate" if error <= tolerance else "WRONG"
@@ -66,6 +74,7 @@ def case(name: str, tolerance: float, solve) -> None:
             "iterations": iterations,
             "verdict": verdict,
             "message": message,
+            "balance": dict(balances),
         }
     )
     shown = "—" if error is None else f"{error:.1e}"
@@ -112,6 +121,7 @@ def plates(
         linear = sc.Subdomains(corrector, krylov=False, max_rounds=100)
         result = sc.solve(system, linear, rtol=1e-12)
         error = error_against(system, truth)
+        record_balance(system)
         if floor is not None:
             system.reset()
             sc.solve(system, sc.Monolithic())
@@ -238,6 +248,7 @@ def joule(voltage: float):
             error = max(error, float(np.abs(values - exact_values).max(initial=0.0)))
             scale = max(scale, float(np.abs(exact_values).max(initial=0.0)))
         worst = max(worst, comm.allreduce(error, op=MPI.MAX) / comm.allreduce(scale, op=MPI.MAX))
+    record_balance(system)
     system.destroy()
     return worst, result.iterations
 
@@ -256,7 +267,8 @@ def threshold(extra: float):
     with sc.System(problem) as system:
         system.reset({"temperature": 300.0})
         result = sc.solve(system, rtol=1e-12)
-        pressure = system.bodies["plate_A"].contact_integral("contact", "pressure") / 0.1
+        pressure = sc.force(system, "contact")[0] / 0.1
+        record_balance(system)
     full = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (nu,) * 2, (alpha,) * 2, 0.0, 1e13)
     scale = full.pressure(heating)  # the pressure the same heating makes without a gap
     return abs(pressure - exact.pressure(heating)) / scale, result.iterations

@@ -131,6 +131,7 @@ for h in conductances:
 with sc.System(stack(stack_scene(8, 8, 8), h=1e4)) as system:
     sc.solve(system)
     sc.write_vtk(args.out, system)
+    readback = sc.summary(system)
 
 if comm.rank == 0:
     figure, axes = plt.subplots(figsize=(7, 4))
@@ -148,6 +149,7 @@ if comm.rank == 0:
     report = {
         "krylov": krylov,
         "fixed_point": fixed_point,
+        "readback": readback,
         "ranks": comm.size,
         "seconds": time.perf_counter() - started,
     }

@@ -237,6 +237,7 @@ with sc.System(case.problem) as system:
     sc.solve(system)
     sc.write_vtk(args.out, system)
     dofs = system.num_dofs()
+    readback = sc.summary(system)
 
 if comm.rank == 0:
     figure, axes = plt.subplots(figsize=(7, 4))
@@ -259,6 +260,7 @@ if comm.rank == 0:
         "partial_condensation_limits": limits,
         "partitioned": partitioned,
         "dofs": dofs,
+        "readback": readback,
         "ranks": comm.size,
         "seconds": time.perf_counter() - started,
     }

@@ -5,7 +5,8 @@ and ``physics`` (materials, contact laws, conditions, UFL residuals per body) �
 (master layers, channels, slave maps) → ``body`` (a body's blocks, its factorisation with the
 contact DOFs left as a Schur block: ``schur``) → ``system`` (every body and master, the
 state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteration: fixed point
-or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) → ``io``.
+or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) →
+``readback`` (integrals by group, contact fields, balances) and ``io`` (VTK).
 Import ``dolfinx_solver`` before this package (this module does it).
 """
 
@@ -13,7 +14,7 @@ import dolfinx_solver  # noqa: F401  (must precede dolfinx and petsc4py)
 
 from subdomain_contact import laws
 from subdomain_contact.correctors import Exact, Method1, Method2, PartialCondensation, paper_factor
-from subdomain_contact.io import write_vtk
+from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
 from subdomain_contact.monolithic import CG_GAMG, Monolithic
 from subdomain_contact.newton import NewtonConvergenceError, NewtonStep, Result, solve
@@ -29,6 +30,16 @@ from subdomain_contact.physics import (
     Potential,
     Problem,
     Temperature,
+)
+from subdomain_contact.readback import (
+    average,
+    balance,
+    contact_fields,
+    current,
+    force,
+    heat,
+    summary,
+    voltage_drop,
 )
 from subdomain_contact.scene import Scene, load_scene
 from subdomain_contact.solvers import DIRECT
@@ -70,9 +81,18 @@ __all__ = [
     "Table",
     "Temperature",
     "Tolerance",
+    "average",
+    "balance",
+    "contact_fields",
+    "current",
+    "force",
+    "heat",
     "laws",
     "load_scene",
     "paper_factor",
+    "plot_vtk",
     "solve",
+    "summary",
+    "voltage_drop",
     "write_vtk",
 ]

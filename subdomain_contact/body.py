@@ -146,11 +146,14 @@ class Body:
         unknowns = [U, *f.masters.values()]
         self.bulk_is_linear = not _depends_on(a_bulk, [U])
         blocks: dict[str, dict[str, ufl.Form]] = {}
+        self._linearised = {  # the links as the Jacobian sees them: with the open ties
+            k: f.links[k] if f.ties[k] is None else f.links[k] + f.ties[k] for k in self.layers
+        }
         for k in self.layers:
             Um = f.masters[k]
             blocks[k] = {
-                "L": ufl.derivative(f.links[k], U, trial),
-                "B": ufl.derivative(f.links[k], Um, trial),
+                "L": ufl.derivative(self._linearised[k], U, trial),
+                "B": ufl.derivative(self._linearised[k], Um, trial),
             }
             if f.remainders[k] is not None:
                 blocks[k]["Ct"] = ufl.derivative(f.remainders[k], U, trial)
@@ -168,7 +171,7 @@ class Body:
         }
         whole = f.bulk
         for k in self.layers:
-            whole = whole + f.links[k]
+            whole = whole + self._linearised[k]
         self.a_whole = ufl.derivative(whole, U, trial)
         self._kept_is = PETSc.IS().createGeneral(
             (self.start + self.kept_local).astype(PETSc.IntType), comm=self.comm
@@ -617,7 +620,7 @@ class Body:
         solid = forms.bulk
         for j in self.layers:
             if j != k:
-                solid = solid + forms.links[j]
+                solid = solid + self._linearised[j]
         a = dolfinx.fem.form(ufl.derivative(solid, U, ufl.TrialFunction(forms.W)))
         K = dolfinx.fem.petsc.assemble_matrix(a, bcs=forms.bcs)
         K.assemble()
@@ -669,32 +672,47 @@ class Body:
         return D
 
     # -- residuals ------------------------------------------------------------------------
-    def residual(self) -> Vector:
-        """Owned body residual at the current state; rows of fixed DOFs hold U − g."""
+    def residual(self, *, conditions: bool = True) -> Vector:
+        """Owned body residual at the current state.
+
+        With ``conditions`` the rows of fixed DOFs hold U − g; without, every row holds the
+        assembled residual, which at a fixed DOF is its reaction [W, A, N].
+        """
         b = dolfinx.fem.petsc.assemble_vector(self.F_bulk)
         for form in self.F_links.values():
             dolfinx.fem.petsc.assemble_vector(b, form)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
-        dolfinx.fem.petsc.set_bc(b, self.forms.bcs, x0=self.U.x.petsc_vec, alpha=-1.0)
+        if conditions:
+            dolfinx.fem.petsc.set_bc(b, self.forms.bcs, x0=self.U.x.petsc_vec, alpha=-1.0)
         values = b.array.copy()
         b.destroy()
         return values
 
     def master_residual(self, k: str) -> Vector:
         """This body's share ``r_k`` of the master residual of k at the current state."""
-        b = dolfinx.fem.petsc.assemble_vector(self.F_fluxes[k])
+        return -self._gathered(self.F_fluxes[k], k)
+
+    def _gathered(self, form: dolfinx.fem.Form, k: str) -> Vector:
+        """A vector form assembled on the body, at the slave DOFs of k in master order."""
+        b = dolfinx.fem.petsc.assemble_vector(form)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
-        values = -self.slaves[k].gather(b.array, self.layers[k].size, self.comm)
+        values = self.slaves[k].gather(b.array, self.layers[k].size, self.comm)
         b.destroy()
         return values
 
-    def contact_share(self, k: str, load: Vector | None = None) -> Vector:
-        """``r_k`` at the current state, which must satisfy the body's equation.
+    def contact_outflow(self, k: str, load: Vector | None = None) -> Vector:
+        """What leaves the body into interface k per master DOF [W, A, N]: its half-link.
 
-        In the stable form of each master DOF: the reaction of the bulk and the other links
-        (minus ``load``, nodal values [W] in master order put into the body at the slaves)
-        for a stiff link, the link itself for a soft one or a fixed slave.
+        The link's nodal terms at the slaves (heat conducted minus the contact's Joule heat
+        deposited on this side, current, contact force), in the stable form of each DOF:
+        for a stiff link the reaction of the bulk and the other links (minus ``load``,
+        nodal values in master order put into the body at the slaves), for a soft one or a
+        fixed slave the link itself. The state must satisfy the body's equation.
         """
+        if not hasattr(self, "blocks"):
+            self.assemble()
+        self.bulk_matrix()
+        use_link = self._soft_or_fixed()[k]
         b = dolfinx.fem.petsc.assemble_vector(self.F_bulk)
         for j, form in self.F_links.items():
             if j != k:
@@ -704,7 +722,7 @@ class Body:
         b.destroy()
         if load is not None:
             rest = rest - load
-        return np.where(self.use_link[k], self.master_residual(k), rest)
+        return np.where(use_link, self._gathered(self.F_links[k], k), -rest)
 
     def set_masters(self, masters: MasterValues) -> None:
         """Write replicated master vectors into the body's master Functions."""

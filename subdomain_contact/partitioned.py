@@ -123,7 +123,7 @@ class _Side:
             F -= nodal
         body.U.x.array[: body.size] -= body.solve(F)  # linear: one Newton step is exact
         body.U.x.scatter_forward()
-        taken = body.contact_share(k, load)
+        taken = -body.contact_outflow(k, load)
         return body.slaves[k].gather(body.U.x.array, self.layer.size, body.comm), taken
 
 

@@ -12,14 +12,16 @@ body α at Γ_k (METHOD.md §2), with n the body's outward normal and the jump `
 - thermal flux h̄ j_T, h̄ = 2 h(p, T_m);
 - current ḡ j_φ, ḡ = 2 g(p, T_m), and the Joule heat ḡ j_φ² deposited on the slave side;
 - normal pressure p = P(⟨2 j_u·n − gap⟩) (unilateral, P the closure law of the whole contact);
-  tangential traction 2 k_n j_t when stuck, none when free.
+  tangential traction 2 k_n j_t when stuck, none when free. An open side transmits nothing to
+  the body; a tiny tie holds its master to the slave (``ties``).
 
 Residuals are internal minus external. The body residual holds the half-links tested with the
 body's test function; the master residual of Γ_k holds minus the same fluxes (Joule heat
-excluded), tested with the master test function, which on body α is the test function at the
-slave DOFs. The two differ by the Joule heat the half-link deposits on the body
-(``remainders``), which is small: the master residual can therefore be taken from the body's own
-equation without subtracting two h̄-sized numbers (:mod:`subdomain_contact.body`).
+excluded, the tie included), tested with the master test function, which on body α is the
+test function at the slave DOFs. The two differ by the Joule heat the half-link deposits on
+the body (``remainders``) and the tie, both small: the master residual can therefore be taken
+from the body's own equation without subtracting two h̄-sized numbers
+(:mod:`subdomain_contact.body`).
 
 Numbers in materials, contacts and conditions become ``dolfinx.fem.Constant`` coefficients, so
 that a sweep over them compiles each form once.
@@ -136,8 +138,11 @@ class Contact:
         gap: Initial gap [m] between the two sides (0: touching).
         pressure: Pressure [Pa] the laws see when the scene has no displacement field.
         temperature: Temperature [K] the laws see when the scene has no temperature field.
-        open_stiffness: Stiffness in tension, relative to the normal law's: it keeps the master
-            layer of an open contact defined; its force is this fraction of a closed one's.
+        open_stiffness: Stiffness, relative to the normal law's (capped at 1e6 E / h, h the
+            body's cell size at the contact), that ties the master layer of an open contact
+            to its slaves: in the master equation, and in the bodies' Newton matrix as a
+            regularisation, never in their residual (an open contact transmits no force).
+            At most 1e-9, so that the Newton matrix stays exact to 1e-3 where it holds.
     """
 
     conductance: float | Law | None = None
@@ -306,6 +311,11 @@ class Problem:
         for attr in ("gap", "pressure", "temperature"):
             check_finite(getattr(c, attr), f"interface '{name}': {attr}")
         check_finite(c.open_stiffness, f"interface '{name}': open_stiffness", positive=True)
+        if c.open_stiffness > 1e-9:
+            raise ValueError(
+                f"interface '{name}': open_stiffness = {c.open_stiffness}: at most 1e-9 (the "
+                "tie of an open contact regularises the Newton matrix, not the residual)"
+            )
 
     def _check_conditions(self) -> None:
         source = self.scene.source
@@ -387,14 +397,24 @@ class BodyForms:
         links: Interface name -> residual of its half-link on the body's side.
         fluxes: Interface name -> the half-link's fluxes tested with the body's test function:
             the master residual of the interface is minus this form at the slave DOFs.
-        remainders: Interface name -> ``links − fluxes``, the Joule heat deposited on the
-            body's side, or None where the scene has no temperature and potential together.
+        remainders: Interface name -> the Joule heat deposited on the body's side (a term
+            of ``links``, not of ``fluxes``), or None where the scene has no temperature and
+            potential together.
+        ties: Interface name -> the open side's tie, ``κ min(closure, 0) n·v`` with κ its
+            stiffness (see :class:`Contact`): a term of ``fluxes`` (it keeps the master of an
+            open contact defined) and of the body's Jacobian (it keeps a body that an
+            opening contact frees from being singular in a Newton step), never of the
+            body's residual; or None without displacement.
         bcs: Dirichlet conditions.
         contact: Interface name -> the half-link's ``"pressure"`` [Pa], ``"current density"``
             [A/m^2] and ``"heat flux"`` [W/m^2] from the body into the master (UFL), where
             the scene has the field.
         ds: Boundary measure of the body, with its facet tags.
         tags: Interface name -> facet tag on the body.
+        sources: The heat sources' residual term −(σ|∇φ|² + Q) v_T (in ``bulk``), or None.
+        loads: Boundary group -> residual term of its flux and convection conditions (in
+            ``bulk``).
+        held: The condition of each of ``bcs``.
     """
 
     name: str
@@ -406,10 +426,14 @@ class BodyForms:
     links: dict[str, ufl.Form]
     fluxes: dict[str, ufl.Form]
     remainders: dict[str, ufl.Form | None]
+    ties: dict[str, ufl.Form | None]
     bcs: list[dolfinx.fem.DirichletBC]
     contact: dict[str, dict[str, Expr]]
     ds: ufl.Measure
     tags: dict[str, int]
+    sources: ufl.Form | None
+    loads: dict[str, ufl.Form]
+    held: list[Condition]
     _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
@@ -473,45 +497,60 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     masters = {i.name: dolfinx.fem.Function(W, name=f"master {i.name}") for i in interfaces}
     u, v = _split(U, fields), _split(ufl.TestFunction(W), fields)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=body.facet_tags)
-    bulk = _bulk(problem.materials[body.name], u, v, mesh.geometry.dim, constant)
-    for form in _neumann(problem, body, u, v, ds, constant):
-        bulk += form
-    links, fluxes, remainders, contact = {}, {}, {}, {}
+    bulk, sources = _bulk(problem.materials[body.name], u, v, mesh.geometry.dim, constant)
+    loads = _neumann(problem, body, u, v, ds, constant)
+    for form in [sources, *loads.values()]:
+        if form is not None:
+            bulk += form
+    links, fluxes, remainders, ties, contact = {}, {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
+    young = problem.materials[body.name].young
+    stiffness = constant(young or 0.0) / ufl.CellDiameter(mesh)  # the bulk's, per area [Pa/m]
     for i in interfaces:
         Um = masters[i.name]
         jump = {f: u[f] - um for f, um in _split(Um, fields).items()}
-        flux, joule, contact[i.name] = _half_link(
-            problem.contacts[i.name], jump, _split(Um, fields), v, n, constant
+        link, joule, tie, contact[i.name] = _half_link(
+            problem.contacts[i.name], jump, _split(Um, fields), v, n, constant, stiffness
         )
-        links[i.name] = (flux if joule is None else flux - joule) * ds(i.tag)
-        fluxes[i.name] = flux * ds(i.tag)
-        remainders[i.name] = None if joule is None else -joule * ds(i.tag)
-    bcs = _dirichlet(problem, body, W, fields)
+        dS = ds(i.tag)
+        links[i.name] = link * dS
+        remainders[i.name] = None if joule is None else joule * dS
+        ties[i.name] = None if tie is None else tie * dS
+        flux = link if joule is None else link - joule
+        fluxes[i.name] = (flux if tie is None else flux + tie) * dS
+    bcs, held = _dirichlet(problem, body, W, fields)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
-        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, bcs, contact, ds, tags
-    )
+        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs, contact,
+        ds, tags, sources, loads, held,
+    )  # fmt: skip
 
 
-def _bulk(m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], Expr]) -> ufl.Form:
-    """Conduction, Joule heating and thermoelasticity in the volume [W, A, N]."""
+def _bulk(
+    m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], Expr]
+) -> tuple[ufl.Form, ufl.Form | None]:
+    """Conduction and thermoelasticity in the volume [W, A, N], and the heat sources apart.
+
+    The sources (Joule heat and ``heat_source``) are a form of their own, −(σ|∇φ|² + Q) v_T,
+    so that the heat generated is the sum of the same assembled numbers the residual holds.
+    Each term is an integral of its own, with its own quadrature degree.
+    """
     reference = constant(m.reference_temperature or 0.0)
     T = u.get("temperature", reference)
     zero = ufl.as_ufl(0.0)
-    terms = []
+    terms, sources = [], []
     if "temperature" in u:
         k = _law(m.conductivity, constant)(zero, T)
         terms.append(k * ufl.inner(ufl.grad(T), ufl.grad(v["temperature"])))
         if m.heat_source != 0:
-            terms.append(-constant(m.heat_source) * v["temperature"])
+            sources.append(-constant(m.heat_source) * v["temperature"])
     if "potential" in u:
         sigma = _law(m.electrical_conductivity, constant)(zero, T)
         phi = u["potential"]
         terms.append(sigma * ufl.inner(ufl.grad(phi), ufl.grad(v["potential"])))
         if "temperature" in u:
             joule = sigma * ufl.inner(ufl.grad(phi), ufl.grad(phi))
-            terms.append(-joule * v["temperature"])
+            sources.append(-joule * v["temperature"])
     if "displacement" in u:
         E, nu = constant(m.young), constant(m.poisson)
         lmbda, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
@@ -521,41 +560,61 @@ def _bulk(m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], E
             thermal = (3 * lmbda + 2 * mu) * constant(m.expansion) * (T - reference)
             stress -= thermal * ufl.Identity(dim)
         terms.append(ufl.inner(stress, ufl.sym(ufl.grad(v["displacement"]))))
-    return sum(terms[1:], terms[0]) * ufl.dx
+    bulk = sum((t * ufl.dx for t in terms[1:]), terms[0] * ufl.dx)
+    heat = sum((t * ufl.dx for t in sources[1:]), sources[0] * ufl.dx) if sources else None
+    return bulk, heat
 
 
 def _half_link(
-    c: Contact, jump: dict, um: dict, v: dict, n: Expr, constant: Callable[[float], Expr]
-) -> tuple[Expr, Expr | None, dict[str, Expr]]:
-    """Flux terms (tested with ``v``), slave-side Joule heat (or None), the half-link's fluxes."""
+    c: Contact,
+    jump: dict,
+    um: dict,
+    v: dict,
+    n: Expr,
+    constant: Callable[[float], Expr],
+    bulk_stiffness: Expr,
+) -> tuple[Expr, Expr | None, Expr | None, dict[str, Expr]]:
+    """The half-link's terms tested with ``v``.
+
+    Returns the terms the body feels (the fluxes minus the contact's Joule heat deposited
+    on its side), that Joule heat term (or None), the open side's tie (or None), and the
+    half-link's fluxes (UFL). The tie's stiffness is ``open_stiffness`` times the normal
+    law's, capped at 1e6 ``bulk_stiffness`` (the body's E / h at the facet) [Pa/m].
+    """
     T_m = um.get("temperature", constant(c.temperature))
     pressure: Expr = constant(c.pressure)
-    fluxes: Expr = ufl.as_ufl(0.0)
+    body: Expr = ufl.as_ufl(0.0)
     joule: Expr | None = None
+    tie: Expr | None = None
     if "displacement" in jump:
         j = jump["displacement"]
         closure = 2.0 * ufl.dot(j, n) - constant(c.gap)  # of the whole contact, per side
         pressure = c.normal(ufl.max_value(closure, 0.0))
-        # an open side (closure ≤ 0, the tie included) keeps a tiny stiffness
+        body += pressure * ufl.dot(n, v["displacement"])
         stretch = ufl.conditional(ufl.le(closure, 0.0), closure, 0.0)
-        tension = constant(c.open_stiffness * c.normal.stiffness) * stretch
-        fluxes += (pressure + tension) * ufl.dot(n, v["displacement"])
+        # at most 1e-3 of the body's own stiffness (open_stiffness ≤ 1e-9): a Newton matrix
+        # that holds it where the residual does not is still exact to 1e-3 on open nodes
+        kappa = constant(c.open_stiffness) * ufl.min_value(
+            1e6 * bulk_stiffness, constant(c.normal.stiffness)
+        )
+        tie = kappa * stretch * ufl.dot(n, v["displacement"])
         if c.tangential == "stuck":
             slip = j - ufl.dot(j, n) * n
-            fluxes += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
+            body += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
     out = {"pressure": pressure}
     if "temperature" in jump:
         h_bar = 2.0 * _law(c.conductance, constant)(pressure, T_m)
         out["heat flux"] = h_bar * jump["temperature"]
-        fluxes += out["heat flux"] * v["temperature"]
+        body += out["heat flux"] * v["temperature"]
     if "potential" in jump:
         g_bar = 2.0 * _law(c.electrical_conductance, constant)(pressure, T_m)
         drop = jump["potential"]
         out["current density"] = g_bar * drop
-        fluxes += out["current density"] * v["potential"]
+        body += out["current density"] * v["potential"]
         if "temperature" in jump:
-            joule = g_bar * drop**2 * v["temperature"]
-    return fluxes, joule, out
+            joule = -g_bar * drop**2 * v["temperature"]
+            body += joule
+    return body, joule, tie, out
 
 
 def _neumann(
@@ -565,27 +624,31 @@ def _neumann(
     v: dict,
     ds: ufl.Measure,
     constant: Callable[[float], Expr],
-) -> list[ufl.Form]:
-    """Boundary fluxes and convection [W, A]."""
-    forms = []
+) -> dict[str, ufl.Form]:
+    """Boundary fluxes and convection [W, A], by boundary group."""
+    forms: dict[str, ufl.Form] = {}
     for bc in problem.conditions:
         if bc.boundary not in body.boundaries:
             continue
-        tag = body.boundaries[bc.boundary]
+        dS = ds(body.boundaries[bc.boundary])
         if isinstance(bc, HeatFlux):
-            forms.append(-constant(bc.value) * v["temperature"] * ds(tag))
+            form = -constant(bc.value) * v["temperature"] * dS
         elif isinstance(bc, CurrentDensity):
-            forms.append(-constant(bc.value) * v["potential"] * ds(tag))
+            form = -constant(bc.value) * v["potential"] * dS
         elif isinstance(bc, Convection):
             T, hc = u["temperature"], constant(bc.coefficient)
-            forms.append(hc * (T - constant(bc.ambient)) * v["temperature"] * ds(tag))
+            form = hc * (T - constant(bc.ambient)) * v["temperature"] * dS
+        else:
+            continue
+        forms[bc.boundary] = form if bc.boundary not in forms else forms[bc.boundary] + form
     return forms
 
 
 def _dirichlet(
     problem: Problem, body: Body, W: dolfinx.fem.FunctionSpace, fields: tuple[str, ...]
-) -> list[dolfinx.fem.DirichletBC]:
-    bcs = []
+) -> tuple[list[dolfinx.fem.DirichletBC], list[Condition]]:
+    """The body's Dirichlet conditions, and the condition each one comes from."""
+    bcs, held = [], []
     fdim = body.mesh.topology.dim - 1
     for bc in problem.conditions:
         if bc.boundary not in body.boundaries or not isinstance(
@@ -599,6 +662,7 @@ def _dirichlet(
         if not callable(bc.value):
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             bcs.append(dolfinx.fem.dirichletbc(np.float64(bc.value), dofs, V))
+            held.append(bc)
             continue
         Vc = V if V is W else V.collapse()[0]
         data = dolfinx.fem.Function(Vc)
@@ -611,6 +675,7 @@ def _dirichlet(
             dofs = dolfinx.fem.locate_dofs_topological((V, Vc), fdim, facets)
             where, values = dofs[1], data.x.array[dofs[1]]
             bcs.append(dolfinx.fem.dirichletbc(data, dofs, V))
+        held.append(bc)
         bad = ~np.isfinite(values)
         first = (
             (values[bad][0], Vc.tabulate_dof_coordinates()[where[bad][0]]) if bad.any() else None
@@ -621,4 +686,4 @@ def _dirichlet(
                 f"{problem.scene.source}: boundary '{bc.boundary}' of body '{body.name}': "
                 f"{type(bc).__name__} data = {found[0][0]} at x = {found[0][1]}: must be finite"
             )
-    return bcs
+    return bcs, held

@@ -270,6 +270,10 @@ class System:
         squares = self._by_field(f, lambda part: np.sum(part**2), MPI.SUM)
         return {n: float(np.sqrt(v)) for n, v in squares.items()}
 
+    def field_sums(self, f: PETSc.Vec) -> dict[str, float]:
+        """1-norm of each field's part of global vector ``f`` (collective)."""
+        return self._by_field(f, lambda part: np.abs(part).sum(), MPI.SUM)
+
     def field_max_norms(self, f: PETSc.Vec) -> dict[str, float]:
         """∞-norm of each field's part of global vector ``f`` (collective)."""
         return self._by_field(f, lambda part: np.abs(part).max(initial=0.0), MPI.MAX)

@@ -121,8 +121,7 @@ class BlocksBetweenWalls:
     uniaxial, σ_xx = −p, and its strain is ε_xx = −p (1 − ν²)/E + (1 + ν) α ΔT in plane strain
     (ε_zz = 0), ε_xx = −p/E + α ΔT in 3D (``plane_strain=False``). The
     contact between the blocks has an initial gap and a penalty law p = k_n ⟨closure − gap⟩;
-    an open contact keeps the tension stiffness ``open_stiffness`` k_n (see
-    :class:`~subdomain_contact.physics.Contact`). Units: m, Pa, 1/K, K, Pa/m.
+    an open contact transmits nothing. Units: m, Pa, 1/K, K, Pa/m.
     """
 
     lengths: tuple[float, float]
@@ -131,7 +130,6 @@ class BlocksBetweenWalls:
     expansion: tuple[float, float]
     gap: float
     stiffness: float
-    open_stiffness: float = 1e-9
     plane_strain: bool = True
 
     def free_closure(self, heating: float) -> float:
@@ -141,22 +139,18 @@ class BlocksBetweenWalls:
             for L, nu, a in zip(self.lengths, self.poisson, self.expansion, strict=True)
         )
 
-    def _traction(self, heating: float, stiffness: float) -> float:
+    def pressure(self, heating: float) -> float:
+        """Contact pressure [Pa] (0 when open)."""
         compliance = sum(
             L * (1 - nu**2 if self.plane_strain else 1.0) / E
             for L, nu, E in zip(self.lengths, self.poisson, self.young, strict=True)
         )
-        return stiffness * (self.free_closure(heating) - self.gap) / (1 + stiffness * compliance)
-
-    def pressure(self, heating: float) -> float:
-        """Contact pressure [Pa] (0 when open)."""
-        return max(self._traction(heating, self.stiffness), 0.0)
+        closure = self.free_closure(heating) - self.gap
+        return max(self.stiffness * closure / (1 + self.stiffness * compliance), 0.0)
 
     def strain(self, heating: float) -> tuple[float, float]:
-        """ε_xx of each block under the contact's traction (compressive: negative stress)."""
-        p = self._traction(heating, self.stiffness)
-        if p < 0:
-            p = self._traction(heating, self.open_stiffness * self.stiffness)
+        """ε_xx of each block under the contact's pressure (compressive: negative stress)."""
+        p = self.pressure(heating)
         return tuple(
             -p * (1 - nu**2 if self.plane_strain else 1.0) / E
             + (1 + nu if self.plane_strain else 1.0) * a * heating
@@ -170,8 +164,5 @@ class BlocksBetweenWalls:
 
     def gap_width(self, heating: float) -> float:
         """Gap [m] between the blocks (negative: the penalty's interpenetration)."""
-        p = self._traction(heating, self.stiffness)
-        if p < 0:
-            p = self._traction(heating, self.open_stiffness * self.stiffness)
-            return -p / (self.open_stiffness * self.stiffness)
-        return -p / self.stiffness
+        p = self.pressure(heating)
+        return -p / self.stiffness if p > 0 else self.gap - self.free_closure(heating)

@@ -1,0 +1,404 @@
+"""What a user reads back from a solved system: integrals by group, contact fields, balances.
+
+Every number here is a sum of the assembled numbers the residual itself holds, so that the
+balance of each field closes to the solver's tolerance, not to a quadrature error:
+
+- through a boundary group where a Dirichlet condition holds the field, the *reaction*: the
+  residual assembled without the condition, summed over the DOFs the condition fixes (a DOF
+  held by two conditions belongs to the first one listed), plus the group's own flux terms;
+- through a group with flux or convection conditions, their assembled terms;
+- through a contact interface, what leaves its first body into it per master node
+  (:meth:`~subdomain_contact.body.Body.contact_outflow`, the stable form of each node),
+  averaged with what enters the second.
+
+Signs: flows are *into the bodies* through a boundary group [W, A; N for the force a support
+exerts], and *from the first body of an interface to the second* (the order of
+``Interface.bodies``). In 2D every integral is per metre of depth. All functions are
+collective over the system's communicator.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import dolfinx.fem.petsc
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from subdomain_contact.body import Body
+from subdomain_contact.physics import FIELD_OF, Displacement
+from subdomain_contact.system import System
+
+__all__ = [
+    "average",
+    "balance",
+    "contact_fields",
+    "current",
+    "force",
+    "heat",
+    "summary",
+    "voltage_drop",
+]
+
+Vector = npt.NDArray[np.float64]
+
+#: Units of the contact fields of :func:`contact_fields`.
+CONTACT_UNITS = {
+    "temperature jump": "K",
+    "heat flux": "W/m^2",
+    "contact Joule heat": "W/m^2",
+    "potential jump": "V",
+    "current density": "A/m^2",
+    "pressure": "Pa",
+    "gap": "m",
+}
+
+
+def current(system: System, group: str) -> float:
+    """Current [A] into the bodies through a boundary group, or across an interface."""
+    return float(_flow(system, group, "potential", None))
+
+
+def heat(system: System, group: str) -> float:
+    """Heat [W] into the bodies through a boundary group, or conducted across an interface.
+
+    Across an interface: the conducted part, the mean of what leaves the first body and
+    what enters the second; the contact's Joule heat is in :func:`balance`.
+    """
+    return float(_flow(system, group, "temperature", None))
+
+
+def force(system: System, group: str) -> Vector:
+    """Force [N] the supports of a boundary group exert on the bodies, per component.
+
+    Across an interface: the force the first body exerts on the second, in the components
+    the contact carries (the normal one alone when it slides freely).
+    """
+    dim = system.problem.scene.bodies[next(iter(system.problem.scene.bodies))].mesh.geometry.dim
+    return np.array([_flow(system, group, "displacement", c) for c in range(dim)])
+
+
+def average(system: System, group: str, field: str) -> float:
+    """Mean of a scalar field [K, V] over a boundary group: ∫ f ds / ∫ ds.
+
+    Over an interface: on its first body's side.
+    """
+    scene = system.problem.scene
+    totals = np.zeros(2)
+    for body in system.bodies.values():
+        if group in scene.interfaces and body.name != scene.interfaces[group].bodies[0]:
+            continue
+        tag = {**scene.bodies[body.name].boundaries, **body.forms.tags}.get(group)
+        if tag is None:
+            continue
+        ds = body.forms.ds(tag)
+        one = dolfinx.fem.Constant(body.forms.W.mesh, 1.0)
+        forms = (_split(body, body.forms.U)[field] * ds, one * ds)
+        local = np.array([dolfinx.fem.assemble_scalar(dolfinx.fem.form(f)) for f in forms])
+        totals += _once(system, body.comm.allreduce(local, op=MPI.SUM))
+    totals = system.comm.allreduce(totals, op=MPI.SUM)
+    if totals[1] == 0:
+        raise ValueError(f"{scene.source}: no boundary group or interface named '{group}'")
+    return float(totals[0] / totals[1])
+
+
+def voltage_drop(system: System, high: str, low: str) -> float:
+    """Mean potential of group ``high`` minus that of ``low`` [V]."""
+    return average(system, high, "potential") - average(system, low, "potential")
+
+
+def balance(system: System) -> dict[str, dict]:
+    """Each conserved field's budget over the whole scene.
+
+    ``"heat"`` [W]: ``groups`` (heat into the bodies through each boundary group with a
+    temperature condition), ``in`` and ``out`` (their positive and negative parts),
+    ``generated`` (Joule heat of the bulk and the contacts, and volume sources),
+    ``imbalance = in − out + generated``, ``scale`` and ``relative = |imbalance| / scale``.
+    ``"current"`` [A]: the same without generation. ``"force"`` [N]: the reactions of each
+    group with a displacement condition, their ``sum`` per component (no loads but the
+    supports: it must vanish), ``scale`` and ``relative``.
+
+    The scale is the larger of the flows and of the field's *cold load*, the 1-norm of its
+    residual with every unknown zero but the Dirichlet values: what the supports would carry
+    if the field were held at its boundary values alone, and so the size of the round-off
+    of any reaction. A scene where nothing flows (uniform temperature) then still has a
+    meaningful relative imbalance.
+    """
+    out = {}
+    problem = system.problem
+    cold = _cold_loads(system)
+    for name, field in (("heat", "temperature"), ("current", "potential")):
+        if field not in problem.fields:
+            continue
+        groups = {
+            g: float(_flow(system, g, field, None)) for g in _condition_groups(system, field)
+        }
+        flows = np.array(list(groups.values()))
+        generated = _generated(system) if field == "temperature" else 0.0
+        total_in, total_out = float(flows[flows > 0].sum()), float(-flows[flows < 0].sum())
+        imbalance = total_in - total_out + generated
+        scale = max(total_in, total_out, abs(generated), cold[field])
+        out[name] = {
+            "groups": groups,
+            "in": total_in,
+            "out": total_out,
+            "generated": float(generated),
+            "imbalance": float(imbalance),
+            "scale": scale,
+            "relative": abs(imbalance) / scale if scale > 0 else 0.0,
+        }
+    if "displacement" in problem.fields:
+        groups = {g: force(system, g) for g in _condition_groups(system, "displacement")}
+        total = np.sum(list(groups.values()), axis=0)
+        scale = max(max(np.abs(f).sum() for f in groups.values()), cold["displacement"])
+        out["force"] = {
+            "groups": {g: f.tolist() for g, f in groups.items()},
+            "sum": total.tolist(),
+            "scale": float(scale),
+            "relative": float(np.abs(total).max() / scale) if scale > 0 else 0.0,
+        }
+    return out
+
+
+def contact_fields(system: System) -> dict[str, dict[str, Vector]]:
+    """Nodal contact fields of every interface, in master order, on every rank.
+
+    Per interface: ``"coordinates"`` [m] of the master nodes, ``"area"`` (their nodal areas
+    ∫ φ_i ds [m^(d−1)]), and where the scene has the field: ``"temperature jump"``
+    T₁ − T₂ [K], ``"heat flux"`` conducted from the first body to the second [W/m²],
+    ``"contact Joule heat"`` [W/m²] (with temperature and potential), ``"potential jump"``
+    φ₁ − φ₂ [V], ``"current density"`` from the first body to the second [A/m²],
+    ``"pressure"`` [Pa] (compression positive) and ``"gap"`` [m] (open positive). Fluxes
+    are nodal reactions over nodal areas: their sums times the areas are the integrals of
+    :func:`heat`, :func:`current` and :func:`force` exactly.
+    """
+    sides = _sides(system)
+    out = {}
+    for k, layer in system.layers.items():
+        first, second = (sides[name][k] for name in layer.interface.bodies)
+        area = layer.areas
+        fields: dict[str, Vector] = {"coordinates": layer.coordinates, "area": area}
+        for c, (field, _) in enumerate(layer.channels):
+            part = slice(c * layer.nodes, (c + 1) * layer.nodes)
+            if field == "temperature":
+                fields["temperature jump"] = first["values"][part] - second["values"][part]
+                leaving, entering = first["outflow"][part], -second["outflow"][part]
+                fields["heat flux"] = 0.5 * (leaving + entering) / area
+                if "potential" in system.problem.fields:
+                    fields["contact Joule heat"] = (entering - leaving) / area
+            elif field == "potential":
+                fields["potential jump"] = first["values"][part] - second["values"][part]
+                leaving, entering = first["outflow"][part], -second["outflow"][part]
+                fields["current density"] = 0.5 * (leaving + entering) / area
+        if "displacement" in system.problem.fields:
+            fields["pressure"], fields["gap"] = _normal_contact(system, k, first, second, area)
+        out[k] = fields
+    return out
+
+
+def summary(system: System) -> dict:
+    """Every integral a report needs, as plain numbers (for JSON).
+
+    ``balance`` (:func:`balance`); ``groups``: per boundary group with a condition, the
+    ``current`` [A], ``heat`` [W], ``force`` [N] through it and its mean ``temperature`` [K]
+    and ``potential`` [V], where the scene has the field; ``contacts``: per interface, the
+    current, heat and force across it, its contact Joule heat [W] and its mean pressure [Pa].
+    """
+    fields = system.problem.fields
+    groups: dict[str, dict] = {}
+    for group in dict.fromkeys(bc.boundary for bc in system.problem.conditions):
+        row = groups.setdefault(group, {})
+        if "potential" in fields:
+            row["current"] = current(system, group)
+            row["potential"] = average(system, group, "potential")
+        if "temperature" in fields:
+            row["heat"] = heat(system, group)
+            row["temperature"] = average(system, group, "temperature")
+        if "displacement" in fields:
+            row["force"] = force(system, group).tolist()
+    contacts: dict[str, dict] = {}
+    nodal = contact_fields(system)
+    for k, values in nodal.items():
+        area = values["area"]
+        row = contacts.setdefault(k, {})
+        if "potential" in fields:
+            row["current"] = current(system, k)
+        if "temperature" in fields:
+            row["heat"] = heat(system, k)
+        if "contact Joule heat" in values:
+            row["Joule heat"] = float(np.sum(values["contact Joule heat"] * area))
+        if "displacement" in fields:
+            row["force"] = force(system, k).tolist()
+            row["mean pressure"] = float(np.sum(values["pressure"] * area) / area.sum())
+    return {"balance": balance(system), "groups": groups, "contacts": contacts}
+
+
+# -- the pieces ---------------------------------------------------------------------------
+def _split(body: Body, w) -> dict:
+    fields = body.forms.fields
+    if len(fields) == 1:
+        return {fields[0]: w}
+    return dict(zip(fields, ufl.split(w), strict=True))
+
+
+def _once(system: System, value):
+    """A value known on every rank of a group, kept on the group's first rank only.
+
+    A sum over the whole communicator then counts it once.
+    """
+    return value if system.problem.scene.group_comm.rank == 0 else 0 * value
+
+
+def _dofs(body: Body, field: str, component: int | None) -> npt.NDArray[np.int32]:
+    """Owned DOFs of ``W`` of one field, or of one displacement component."""
+    parent_of = body.forms.collapsed(field, component)[1]
+    return parent_of[parent_of < body.size]
+
+
+def _assembled(form: ufl.Form) -> Vector:
+    b = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
+    b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+    values = b.array.copy()
+    b.destroy()
+    return values
+
+
+def _held(
+    body: Body, group: str, field: str, component: int | None
+) -> npt.NDArray[np.int32] | None:
+    """Owned DOFs of the field that a condition on ``group`` fixes (the first one listed).
+
+    None where no condition on ``group`` holds the field (the same on every rank).
+    """
+    taken = np.zeros(0, dtype=np.int32)
+    for bc, condition in zip(body.forms.bcs, body.forms.held, strict=True):
+        if FIELD_OF[type(condition)] != field:
+            continue
+        if isinstance(condition, Displacement) and condition.component != component:
+            continue
+        dofs = bc.dof_indices()[0][: bc.dof_indices()[1]]
+        dofs = dofs[dofs < body.size]
+        if condition.boundary == group:
+            return np.setdiff1d(dofs, taken).astype(np.int32)
+        taken = np.union1d(taken, dofs)
+    return None
+
+
+def _flow(system: System, group: str, field: str, component: int | None) -> float:
+    """What enters the bodies through a boundary group, or crosses an interface."""
+    if group in system.layers:
+        return _across(system, group, field, component)
+    scene = system.problem.scene
+    if not any(group in b.boundaries for b in scene.bodies.values()):
+        raise ValueError(
+            f"{scene.source}: no boundary group or interface named '{group}'; boundary groups: "
+            f"{sorted(set().union(*(b.boundaries for b in scene.bodies.values())))}"
+        )
+    total = 0.0
+    for body in system.bodies.values():
+        if group not in scene.bodies[body.name].boundaries:
+            continue
+        dofs = _dofs(body, field, component)
+        local = 0.0
+        held = _held(body, group, field, component)
+        if held is not None:  # (collective: the same on every rank of the body)
+            local += body.residual(conditions=False)[held].sum()
+        if group in body.forms.loads:
+            local -= _assembled(body.forms.loads[group])[dofs].sum()
+        total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
+    return system.comm.allreduce(total, op=MPI.SUM)
+
+
+def _across(system: System, k: str, field: str, component: int | None) -> float:
+    layer = system.layers[k]
+    if (field, component) not in layer.channels and (field, None) not in layer.channels:
+        return 0.0
+    c = layer.channels.index((field, component if field == "displacement" else None))
+    part = slice(c * layer.nodes, (c + 1) * layer.nodes)
+    sides = _sides(system, [k])
+    first, second = (sides[name][k]["outflow"][part] for name in layer.interface.bodies)
+    return float(0.5 * (first.sum() - second.sum()))
+
+
+def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dict[str, dict]]:
+    """Body -> interface -> the body's side of it, in master order, on every rank.
+
+    Each side: ``values`` at the slaves, ``outflow`` (:meth:`Body.contact_outflow`) and
+    ``normal`` (nodal ∫ n_c φ_i ds of the displacement channels).
+    """
+    local = {}
+    for name, body in system.bodies.items():
+        local[name] = {}
+        for k in body.layers:
+            if interfaces is not None and k not in interfaces:
+                continue
+            layer = body.layers[k]
+            side = {
+                "values": body.slaves[k].gather(body.U.x.array, layer.size, body.comm),
+                "outflow": body.contact_outflow(k),
+            }
+            if "displacement" in body.forms.fields:
+                n = ufl.FacetNormal(body.forms.W.mesh)
+                v = _split(body, ufl.TestFunction(body.forms.W))["displacement"]
+                form = ufl.dot(n, v) * body.forms.ds(body.forms.tags[k])
+                side["normal"] = body._gathered(dolfinx.fem.form(form), k)
+            local[name][k] = side
+    return system.everywhere(local)
+
+
+def _normal_contact(
+    system: System, k: str, first: dict, second: dict, area: Vector
+) -> tuple[Vector, Vector]:
+    """Nodal pressure (mean of the two sides' reactions) and gap of interface k."""
+    layer = system.layers[k]
+    channels = [c for c, (f, _) in enumerate(layer.channels) if f == "displacement"]
+    parts = [slice(c * layer.nodes, (c + 1) * layer.nodes) for c in channels]
+
+    def vectors(side: dict, key: str) -> Vector:
+        return np.stack([side[key][p] for p in parts], axis=1)
+
+    pressure = np.zeros(layer.nodes)
+    for side in (first, second):
+        normal = vectors(side, "normal")
+        unit = normal / np.linalg.norm(normal, axis=1)[:, None]
+        pressure += 0.5 * np.sum(vectors(side, "outflow") * unit, axis=1) / area
+    unit = vectors(first, "normal")
+    unit = unit / np.linalg.norm(unit, axis=1)[:, None]
+    jump = vectors(first, "values") - vectors(second, "values")
+    gap = system.problem.contacts[k].gap - np.sum(jump * unit, axis=1)
+    return pressure, gap
+
+
+def _cold_loads(system: System) -> dict[str, float]:
+    """1-norm of each field's residual at the cold state (the state is kept)."""
+    state, f = system.state(), system.create_vector()
+    try:
+        system.reset()
+        system.apply_conditions()
+        system.residual(f)
+        return system.field_sums(f)
+    finally:
+        system.set_state(state)
+        state.destroy()
+        f.destroy()
+
+
+def _condition_groups(system: System, field: str) -> list[str]:
+    """Boundary groups with a condition on ``field``, in the order first listed."""
+    groups = [bc.boundary for bc in system.problem.conditions if FIELD_OF[type(bc)] == field]
+    return list(dict.fromkeys(groups))
+
+
+def _generated(system: System) -> float:
+    """Heat [W] generated in the bulk (Joule heat, sources) and in the contacts (Joule)."""
+    total = 0.0
+    for body in system.bodies.values():
+        dofs = _dofs(body, "temperature", None)
+        forms = [body.forms.sources] + [
+            body.forms.remainders[k] for k in body.layers if "potential" in body.forms.fields
+        ]
+        local = -sum(_assembled(f)[dofs].sum() for f in forms if f is not None)
+        total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
+    return system.comm.allreduce(total, op=MPI.SUM)
