@@ -737,6 +737,32 @@ class Body:
             bc.set(self.U.x.array)
         self.U.x.scatter_forward()
 
+    def failing_law(self) -> str | None:
+        """The first conductivity or conductance that is negative or NaN at the current state.
+
+        Named with a point [m] where it fails, or None (collective on the body).
+        """
+        if not hasattr(self, "_law_checks"):
+            mesh = self.forms.W.mesh
+            w = ufl.TestFunction(dolfinx.fem.functionspace(mesh, ("DG", 0)))
+            self._law_checks = [
+                (name, dolfinx.fem.form(ufl.conditional(ufl.ge(law, 0.0), 0.0, 1.0) * w * dm))
+                for name, (law, dm) in self.forms.laws.items()
+            ]
+        mesh = self.forms.W.mesh
+        tdim = mesh.topology.dim
+        owned = mesh.topology.index_map(tdim).size_local
+        for name, form in self._law_checks:
+            b = dolfinx.fem.petsc.assemble_vector(form)
+            b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+            cells = np.flatnonzero(b.array[:owned] > 0).astype(np.int32)
+            b.destroy()
+            point = dolfinx.mesh.compute_midpoints(mesh, tdim, cells[:1]) if cells.size else None
+            found = [x for x in self.comm.allgather(point) if x is not None]
+            if found:
+                return f"{name} is negative or not a number near x = {found[0][0]}"
+        return None
+
     def nodal(self, field: str, component: int | None = None) -> tuple[Matrix, Vector]:
         """Coordinates [m] and values of one field (or component) at this rank's owned nodes."""
         V, parent_of = self.forms.collapsed(field, component)

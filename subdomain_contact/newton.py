@@ -288,10 +288,13 @@ def solve(
     Raises:
         NewtonConvergenceError: Newton (or an inner solve) failed with every line search;
             the error holds the last attempt's history and names the others' failures.
+        ValueError: A conductivity or conductance is negative or NaN at the initial state
+            or at the solution (the state is kept, for a look).
     """
     start = time.perf_counter()
     linear = linear or Subdomains()
     linear.check(system)
+    system.check_laws("at the initial state")
     made = _factorisations(system)
     initial = system.state()
     failures = []
@@ -313,6 +316,7 @@ def solve(
             ) from last.__cause__
     finally:
         initial.destroy()
+    system.check_laws("at the solution Newton found")
     result.line_search = attempt
     result.seconds = time.perf_counter() - start
     result.factorisations = _factorisations(system) - made

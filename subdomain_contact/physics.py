@@ -415,6 +415,8 @@ class BodyForms:
         loads: Boundary group -> residual term of its flux and convection conditions (in
             ``bulk``).
         held: The condition of each of ``bcs``.
+        laws: The conductivities and conductances (W/(m K), S/m, W/(m² K), S/m²) as UFL of
+            the state, by name, each with the measure where it holds; they must stay ≥ 0.
     """
 
     name: str
@@ -434,6 +436,7 @@ class BodyForms:
     sources: ufl.Form | None
     loads: dict[str, ufl.Form]
     held: list[Condition]
+    laws: dict[str, tuple[Expr, ufl.Measure]]
     _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
@@ -497,7 +500,10 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     masters = {i.name: dolfinx.fem.Function(W, name=f"master {i.name}") for i in interfaces}
     u, v = _split(U, fields), _split(ufl.TestFunction(W), fields)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=body.facet_tags)
-    bulk, sources = _bulk(problem.materials[body.name], u, v, mesh.geometry.dim, constant)
+    bulk, sources, material_laws = _bulk(
+        problem.materials[body.name], u, v, mesh.geometry.dim, constant
+    )
+    laws = {f"{name} of body '{body.name}'": (law, ufl.dx) for name, law in material_laws.items()}
     loads = _neumann(problem, body, u, v, ds, constant)
     for form in [sources, *loads.values()]:
         if form is not None:
@@ -513,6 +519,9 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
             problem.contacts[i.name], jump, _split(Um, fields), v, n, constant, stiffness
         )
         dS = ds(i.tag)
+        for name in ("conductance", "electrical_conductance"):
+            if name in contact[i.name]:
+                laws[f"{name} of interface '{i.name}'"] = (contact[i.name].pop(name), dS)
         links[i.name] = link * dS
         remainders[i.name] = None if joule is None else joule * dS
         ties[i.name] = None if tie is None else tie * dS
@@ -522,30 +531,31 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
         body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs, contact,
-        ds, tags, sources, loads, held,
+        ds, tags, sources, loads, held, laws,
     )  # fmt: skip
 
 
 def _bulk(
     m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], Expr]
-) -> tuple[ufl.Form, ufl.Form | None]:
+) -> tuple[ufl.Form, ufl.Form | None, dict[str, Expr]]:
     """Conduction and thermoelasticity in the volume [W, A, N], and the heat sources apart.
 
     The sources (Joule heat and ``heat_source``) are a form of their own, −(σ|∇φ|² + Q) v_T,
     so that the heat generated is the sum of the same assembled numbers the residual holds.
-    Each term is an integral of its own, with its own quadrature degree.
+    Each term is an integral of its own, with its own quadrature degree. Also returns the
+    material's laws of T by name.
     """
     reference = constant(m.reference_temperature or 0.0)
     T = u.get("temperature", reference)
     zero = ufl.as_ufl(0.0)
-    terms, sources = [], []
+    terms, sources, laws = [], [], {}
     if "temperature" in u:
-        k = _law(m.conductivity, constant)(zero, T)
+        k = laws["conductivity"] = _law(m.conductivity, constant)(zero, T)
         terms.append(k * ufl.inner(ufl.grad(T), ufl.grad(v["temperature"])))
         if m.heat_source != 0:
             sources.append(-constant(m.heat_source) * v["temperature"])
     if "potential" in u:
-        sigma = _law(m.electrical_conductivity, constant)(zero, T)
+        sigma = laws["electrical_conductivity"] = _law(m.electrical_conductivity, constant)(zero, T)
         phi = u["potential"]
         terms.append(sigma * ufl.inner(ufl.grad(phi), ufl.grad(v["potential"])))
         if "temperature" in u:
@@ -562,7 +572,7 @@ def _bulk(
         terms.append(ufl.inner(stress, ufl.sym(ufl.grad(v["displacement"]))))
     bulk = sum((t * ufl.dx for t in terms[1:]), terms[0] * ufl.dx)
     heat = sum((t * ufl.dx for t in sources[1:]), sources[0] * ufl.dx) if sources else None
-    return bulk, heat
+    return bulk, heat, laws
 
 
 def _half_link(
@@ -603,11 +613,13 @@ def _half_link(
             body += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
     out = {"pressure": pressure}
     if "temperature" in jump:
-        h_bar = 2.0 * _law(c.conductance, constant)(pressure, T_m)
+        out["conductance"] = _law(c.conductance, constant)(pressure, T_m)
+        h_bar = 2.0 * out["conductance"]
         out["heat flux"] = h_bar * jump["temperature"]
         body += out["heat flux"] * v["temperature"]
     if "potential" in jump:
-        g_bar = 2.0 * _law(c.electrical_conductance, constant)(pressure, T_m)
+        out["electrical_conductance"] = _law(c.electrical_conductance, constant)(pressure, T_m)
+        g_bar = 2.0 * out["electrical_conductance"]
         drop = jump["potential"]
         out["current density"] = g_bar * drop
         body += out["current density"] * v["potential"]

@@ -132,9 +132,7 @@ def balance(system: System) -> dict[str, dict]:
     for name, field in (("heat", "temperature"), ("current", "potential")):
         if field not in problem.fields:
             continue
-        groups = {
-            g: float(_flow(system, g, field, None)) for g in _condition_groups(system, field)
-        }
+        groups = {g: float(_flow(system, g, field, None)) for g in _condition_groups(system, field)}
         flows = np.array(list(groups.values()))
         generated = _generated(system) if field == "temperature" else 0.0
         total_in, total_out = float(flows[flows > 0].sum()), float(-flows[flows < 0].sum())

@@ -23,7 +23,7 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.masters import MasterLayer, master_layer
-from subdomain_contact.physics import FIELDS, Problem
+from subdomain_contact.physics import FIELDS, Displacement, Problem
 
 __all__ = ["System"]
 
@@ -54,6 +54,8 @@ class System:
             k: master_layer(problem, i) for k, i in scene.interfaces.items()
         }
         self.sizes = {k: layer.size for k, layer in self.layers.items()}
+        if "displacement" in problem.fields:
+            self._check_held_in_place()
         self.bodies: dict[str, Body] = {}
         for name, body in scene.bodies.items():
             if scene.is_local(name):
@@ -97,6 +99,38 @@ class System:
         """Free every body's PETSc objects (collective)."""
         for body in self.bodies.values():
             body.destroy()
+
+    def _check_held_in_place(self) -> None:
+        """Refuse bodies whose displacement along an axis nothing holds, even through contacts.
+
+        Along each axis, the bodies joined by contacts that carry that component (a freely
+        sliding contact carries its normal one alone) need a Displacement condition on it
+        somewhere; otherwise they may translate freely and every solver returns an arbitrary
+        position. (Rotations are not checked.)
+        """
+        scene = self.problem.scene
+        dim = next(iter(scene.bodies.values())).mesh.geometry.dim
+        for component in range(dim):
+            group = {name: {name} for name in scene.bodies}
+            for k, layer in self.layers.items():
+                if ("displacement", component) in layer.channels:
+                    first, second = scene.interfaces[k].bodies
+                    merged = group[first] | group[second]
+                    for name in merged:
+                        group[name] = merged
+            held = {
+                bc.boundary
+                for bc in self.problem.conditions
+                if isinstance(bc, Displacement) and bc.component == component
+            }
+            for members in {frozenset(g) for g in group.values()}:
+                if not any(held & set(scene.bodies[n].boundaries) for n in members):
+                    raise ValueError(
+                        f"{scene.source}: bodies {sorted(members)} have no Displacement "
+                        f"condition on component {component} ({'xyz'[component]}) and no "
+                        "contact carries it to one: they may move freely along that axis "
+                        "(hold a point or a symmetry plane, or make a contact stuck)"
+                    )
 
     # -- layout ---------------------------------------------------------------------------
     def _floats(self, body: Body) -> bool:
@@ -242,6 +276,25 @@ class System:
         out[self.master_slice] = self.join_masters(
             {k: np.where(self.active[k], r, self.masters[k]) for k, r in masters.items()}
         )
+
+    def check_laws(self, when: str) -> None:
+        """Refuse a state where a law is negative or NaN (collective), naming it and a point.
+
+        Args:
+            when: Which state, for the message (e.g. "at the initial state").
+
+        Raises:
+            ValueError: On every rank.
+        """
+        failing = self._everywhere({n: b.failing_law() for n, b in self.bodies.items()})
+        found = [message for message in failing.values() if message is not None]
+        if found:
+            raise ValueError(
+                f"{self.problem.scene.source}: {when}, {found[0]}: a conductivity or "
+                "conductance must be >= 0 over the range of temperature and pressure the "
+                "solution visits; check the law there, or start from a state inside its range "
+                "(e.g. system.reset({'temperature': 300.0}))"
+            )
 
     def assemble_jacobian(self) -> None:
         """Every body's Jacobian blocks at the current state (the linear solver factorises)."""

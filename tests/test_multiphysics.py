@@ -242,6 +242,53 @@ def test_condition_for_a_missing_field_is_refused(bars):
         )
 
 
+def test_a_law_that_goes_negative_is_named_with_a_point(bars):
+    """k(T) = T − 250 at the initial state (0 K); h(T) = 1e3 (340 − T) at the solution (the
+    contact between 300 K and 400 K ends near 350 K): refused, the law and a point named."""
+    fixed = [Temperature("left", 300.0), Temperature("right", 400.0)]
+    negative_k = Problem(
+        bars,
+        {
+            "plate_A": Material(conductivity=lambda p, T: T - 250.0),
+            "plate_B": Material(conductivity=1.0),
+        },
+        {"contact": Contact(conductance=10.0)},
+        fixed,
+    )
+    system = make_system(negative_k)
+    system.reset()
+    with pytest.raises(
+        ValueError, match=r"at the initial state, conductivity of body 'plate_A' is negative"
+    ):
+        sc.solve(system)
+    negative_h = Problem(
+        bars,
+        {"plate_A": Material(conductivity=10.0), "plate_B": Material(conductivity=10.0)},
+        {"contact": Contact(conductance=lambda p, T: 1e3 * (340.0 - T))},
+        fixed,
+    )
+    system = make_system(negative_h)
+    system.reset({"temperature": 300.0})
+    with pytest.raises(
+        ValueError,
+        match=r"solution .* conductance of interface 'contact' is negative .* near x = \[0\.4",
+    ):
+        sc.solve(system)
+
+
+def test_a_body_free_to_slide_is_refused(bars):
+    """Walls hold x, nothing holds y: the blocks may slide up and down."""
+    steel = Material(conductivity=45.0, young=200e9)
+    problem = Problem(
+        bars,
+        {"plate_A": steel, "plate_B": steel},
+        {"contact": Contact(conductance=1e4, normal=Penalty(1e13))},
+        [Temperature("left", 300.0), Displacement("left", 0, 0.0), Displacement("right", 0, 0.0)],
+    )
+    with pytest.raises(ValueError, match=r"no Displacement condition on component 1 \(y\)"):
+        make_system(problem)
+
+
 def test_power_law_refuses_a_zero_floor():
     with pytest.raises(ValueError, match="floor"):
         laws.PowerLaw(scale=1.0, hardness=1e6, exponent=0.9, floor=0.0)

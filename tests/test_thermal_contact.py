@@ -5,8 +5,8 @@ import pytest
 from helpers import linear_solve, make_system, monolithic, snapshot
 
 import subdomain_contact as sc
-from verification.analytic import TwoPlates
-from verification.cases import TwoPlatesCase, two_plates, two_plates_scene
+from verification.analytic import TwoPlates, WavyPlates
+from verification.cases import TwoPlatesCase, blocks3d_scene, two_plates, two_plates_scene
 from verification.nodal import error_against, field_values, relative_nodal_error
 
 
@@ -149,6 +149,62 @@ def test_temperature_data_as_a_function_of_x(plates):
     }
     # nodally exact, round-off only: measured 2.7e-15 (4.5e-15 on 2 ranks)
     assert error_against(system, reference) <= 1e-10
+
+
+def l2_error(system, exact) -> float:
+    """‖T_h − T‖ / ‖T‖ in L² over every body (exact: ``(x, y) -> (T_A, T_B)`` in UFL)."""
+    import dolfinx
+    import ufl
+    from mpi4py import MPI
+
+    sums = np.zeros(2)
+    for name, body in system.bodies.items():
+        x = ufl.SpatialCoordinate(body.forms.W.mesh)
+        truth = exact(x[0], x[1], module=ufl)[0 if name.endswith("A") else 1]
+        dx = ufl.dx(metadata={"quadrature_degree": 6})
+        for i, form in enumerate([(body.U - truth) ** 2 * dx, truth**2 * dx]):
+            local = dolfinx.fem.assemble_scalar(dolfinx.fem.form(form))
+            sums[i] += body.comm.allreduce(local, op=MPI.SUM)
+    return float(np.sqrt(sums[0] / sums[1]))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
+    """Manufactured solution: the 1D solution plus a harmonic mode cos(κy) X(x) that crosses
+    the contact (both of its conditions hold), imposed by functions of x on both ends.
+
+    P1 converges as h² in L². Three meshes halving h; the rate of the finer pair is 2 up to
+    the pre-asymptotic term O((κh)²) of the coarse pair (κh = 0.39 in 2D, 0.79 in 3D):
+    measured 1.995 (2D) and 1.980 (3D), the same on 2 ranks; [1.8, 2.2] holds that term with
+    a margin of 2 or more.
+    """
+    length, width = (1.0, 1.0) if dim == 2 else (0.5, 0.2)
+    plates = TwoPlates(length, length, 1.0, 2.0, 10.0, 300.0, 320.0)
+    exact = WavyPlates(plates, width, amplitude=5.0)
+
+    def data(x):
+        a, b = exact.temperature(x[0], x[1])
+        return np.where(x[0] <= length, a, b)
+
+    errors = []
+    for refinement in (1, 2, 4):
+        if dim == 2:
+            scene = two_plates_scene(4 * refinement, 4 * refinement, comm=comm)
+        else:
+            scene = blocks3d_scene(0.05 / refinement, comm=comm)
+        bodies = list(scene.bodies)
+        problem = sc.Problem(
+            scene,
+            {bodies[0]: sc.Material(conductivity=1.0), bodies[1]: sc.Material(conductivity=2.0)},
+            {"contact": sc.Contact(conductance=10.0)},
+            [sc.Temperature("left", data), sc.Temperature("right", data)],
+        )
+        system, _ = linear_solve(problem)
+        errors.append(l2_error(system, exact.temperature))
+    rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    assert 1.8 <= rates[-1] <= 2.2, (errors, rates)
+    # the mode is resolved, not a rate of noise: measured 2.1e-4 (2D), 6.0e-3 (3D)
+    assert errors[-1] < 1e-2
 
 
 def test_dirichlet_data_that_is_not_finite_is_refused(plates):

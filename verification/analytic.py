@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BlocksBetweenWalls", "JouleBars", "TwoPlates"]
+__all__ = ["BlocksBetweenWalls", "JouleBars", "TwoPlates", "WavyPlates"]
 
 
 @dataclass(frozen=True)
@@ -166,3 +166,41 @@ class BlocksBetweenWalls:
         """Gap [m] between the blocks (negative: the penalty's interpenetration)."""
         p = self.pressure(heating)
         return -p / self.stiffness if p > 0 else self.gap - self.free_closure(heating)
+
+
+@dataclass(frozen=True)
+class WavyPlates:
+    """Two plates in series whose temperature also varies along the contact (no sources).
+
+    ``T = T₁(x) + m cos(κ y) X(x)``: ``T₁`` the 1D solution of :class:`TwoPlates` (``plates``)
+    and a harmonic mode, κ = π / ``width`` (so that ∂T/∂y = 0 on y = 0 and y = width:
+    insulated sides), ``X_A = e^{κ(x − L_a)}`` in plate A and ``X_B = β e^{κ(x − L_a)} +
+    γ e^{−κ(x − L_a)}`` in plate B, with β, γ from the contact's two conditions (the same flux
+    on both sides, a jump of flux / h). Dirichlet data on the two ends are functions of
+    x and y. Units: m, K.
+    """
+
+    plates: TwoPlates
+    width: float
+    amplitude: float
+
+    @property
+    def wavenumber(self) -> float:
+        """κ [1/m]."""
+        return np.pi / self.width
+
+    def _coefficients(self) -> tuple[float, float]:
+        p, kappa = self.plates, self.wavenumber
+        total = 1 + p.k_a * kappa / p.h  # β + γ
+        difference = p.k_a / p.k_b  # β − γ
+        return (total + difference) / 2, (total - difference) / 2
+
+    def temperature(self, x, y, module=np):
+        """Exact temperature [K] at (x, y) (arrays, or UFL with ``module=ufl``)."""
+        p, kappa, m = self.plates, self.wavenumber, self.amplitude
+        beta, gamma = self._coefficients()
+        s = x - p.length_a
+        on_b = module.exp(kappa * s)
+        mode_a = m * module.cos(kappa * y) * module.exp(kappa * s)
+        mode_b = m * module.cos(kappa * y) * (beta * on_b + gamma * module.exp(-kappa * s))
+        return (p.temperature_a(x) + mode_a), (p.temperature_b(x) + mode_b)
