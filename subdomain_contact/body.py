@@ -770,13 +770,3 @@ class Body:
             raise ValueError(f"nodal('{field}'): give the component of a vector field")
         owned = V.dofmap.index_map.size_local
         return V.tabulate_dof_coordinates()[:owned], self.U.x.array[parent_of[:owned]]
-
-    def contact_integral(self, k: str, quantity: str) -> float:
-        """``∫_Γk q ds`` of a half-link quantity over the interface (collective).
-
-        ``quantity``: ``"pressure"`` [Pa], ``"current density"`` [A/m^2] or ``"heat flux"``
-        [W/m^2]; the integral is in that unit times m^(d-1).
-        """
-        forms = self.forms
-        form = dolfinx.fem.form(forms.contact[k][quantity] * forms.ds(forms.tags[k]))
-        return self.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)

@@ -406,9 +406,6 @@ class BodyForms:
             opening contact frees from being singular in a Newton step), never of the
             body's residual; or None without displacement.
         bcs: Dirichlet conditions.
-        contact: Interface name -> the half-link's ``"pressure"`` [Pa], ``"current density"``
-            [A/m^2] and ``"heat flux"`` [W/m^2] from the body into the master (UFL), where
-            the scene has the field.
         ds: Boundary measure of the body, with its facet tags.
         tags: Interface name -> facet tag on the body.
         sources: The heat sources' residual term −(σ|∇φ|² + Q) v_T (in ``bulk``), or None.
@@ -430,7 +427,6 @@ class BodyForms:
     remainders: dict[str, ufl.Form | None]
     ties: dict[str, ufl.Form | None]
     bcs: list[dolfinx.fem.DirichletBC]
-    contact: dict[str, dict[str, Expr]]
     ds: ufl.Measure
     tags: dict[str, int]
     sources: ufl.Form | None
@@ -508,20 +504,19 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     for form in [sources, *loads.values()]:
         if form is not None:
             bulk += form
-    links, fluxes, remainders, ties, contact = {}, {}, {}, {}, {}
+    links, fluxes, remainders, ties = {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
     young = problem.materials[body.name].young
     stiffness = constant(young or 0.0) / ufl.CellDiameter(mesh)  # the bulk's, per area [Pa/m]
     for i in interfaces:
         Um = masters[i.name]
         jump = {f: u[f] - um for f, um in _split(Um, fields).items()}
-        link, joule, tie, contact[i.name] = _half_link(
+        link, joule, tie, contact_laws = _half_link(
             problem.contacts[i.name], jump, _split(Um, fields), v, n, constant, stiffness
         )
         dS = ds(i.tag)
-        for name in ("conductance", "electrical_conductance"):
-            if name in contact[i.name]:
-                laws[f"{name} of interface '{i.name}'"] = (contact[i.name].pop(name), dS)
+        for name, law in contact_laws.items():
+            laws[f"{name} of interface '{i.name}'"] = (law, dS)
         links[i.name] = link * dS
         remainders[i.name] = None if joule is None else joule * dS
         ties[i.name] = None if tie is None else tie * dS
@@ -530,7 +525,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     bcs, held = _dirichlet(problem, body, W, fields)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
-        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs, contact,
+        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
         ds, tags, sources, loads, held, laws,
     )  # fmt: skip
 
@@ -588,8 +583,9 @@ def _half_link(
 
     Returns the terms the body feels (the fluxes minus the contact's Joule heat deposited
     on its side), that Joule heat term (or None), the open side's tie (or None), and the
-    half-link's fluxes (UFL). The tie's stiffness is ``open_stiffness`` times the normal
-    law's, capped at 1e6 ``bulk_stiffness`` (the body's E / h at the facet) [Pa/m].
+    contact's conductances h(p, T_m), g(p, T_m) by name (UFL). The tie's stiffness is
+    ``open_stiffness`` times the normal law's, capped at 1e6 ``bulk_stiffness`` (the body's
+    E / h at the facet) [Pa/m].
     """
     T_m = um.get("temperature", constant(c.temperature))
     pressure: Expr = constant(c.pressure)
@@ -611,22 +607,18 @@ def _half_link(
         if c.tangential == "stuck":
             slip = j - ufl.dot(j, n) * n
             body += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
-    out = {"pressure": pressure}
+    laws = {}
     if "temperature" in jump:
-        out["conductance"] = _law(c.conductance, constant)(pressure, T_m)
-        h_bar = 2.0 * out["conductance"]
-        out["heat flux"] = h_bar * jump["temperature"]
-        body += out["heat flux"] * v["temperature"]
+        laws["conductance"] = _law(c.conductance, constant)(pressure, T_m)
+        body += 2.0 * laws["conductance"] * jump["temperature"] * v["temperature"]
     if "potential" in jump:
-        out["electrical_conductance"] = _law(c.electrical_conductance, constant)(pressure, T_m)
-        g_bar = 2.0 * out["electrical_conductance"]
-        drop = jump["potential"]
-        out["current density"] = g_bar * drop
-        body += out["current density"] * v["potential"]
+        laws["electrical_conductance"] = _law(c.electrical_conductance, constant)(pressure, T_m)
+        current = 2.0 * laws["electrical_conductance"] * jump["potential"]
+        body += current * v["potential"]
         if "temperature" in jump:
-            joule = -g_bar * drop**2 * v["temperature"]
+            joule = -current * jump["potential"] * v["temperature"]
             body += joule
-    return body, joule, tie, out
+    return body, joule, tie, laws
 
 
 def _neumann(

@@ -16,7 +16,8 @@ def test_vtk_reads_back_with_units(plates, shared_tmp, comm):
     case = two_plates(plates, h=3.0, source_a=2.0)
     system, _ = linear_solve(case.problem)
     files = sc.write_vtk(shared_tmp, system)
-    assert [f.name for f in files] == ["plate_A.pvd", "plate_B.pvd", "master_contact.pvd"]
+    names = ["plate_A.pvd", "plate_B.pvd", "master_contact.pvd", "scene.pvd"]
+    assert [f.name for f in files] == names
     comm.barrier()
     if comm.rank == 0:
         for name, expected in [
