@@ -742,25 +742,28 @@ class Body:
 
         Named with a point [m] where it fails, or None (collective on the body).
         """
+        if not self.forms.laws:
+            return None
+        field = self.forms.fields[0]  # temperature or potential: the laws' fields come first
+        V, parent_of = self.forms.collapsed(field)
         if not hasattr(self, "_law_checks"):
-            mesh = self.forms.W.mesh
-            w = ufl.TestFunction(dolfinx.fem.functionspace(mesh, ("DG", 0)))
+            v = ufl.TestFunction(self.forms.W)
+            v = v if len(self.forms.fields) == 1 else ufl.split(v)[0]
             self._law_checks = [
-                (name, dolfinx.fem.form(ufl.conditional(ufl.ge(law, 0.0), 0.0, 1.0) * w * dm))
+                (name, dolfinx.fem.form(ufl.conditional(ufl.ge(law, 0.0), 0.0, 1.0) * v * dm))
                 for name, (law, dm) in self.forms.laws.items()
             ]
-        mesh = self.forms.W.mesh
-        tdim = mesh.topology.dim
-        owned = mesh.topology.index_map(tdim).size_local
+        owned = V.dofmap.index_map.size_local
         for name, form in self._law_checks:
             b = dolfinx.fem.petsc.assemble_vector(form)
             b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
-            cells = np.flatnonzero(b.array[:owned] > 0).astype(np.int32)
+            bad = np.flatnonzero(b.array[parent_of[:owned]] > 0)
             b.destroy()
-            point = dolfinx.mesh.compute_midpoints(mesh, tdim, cells[:1]) if cells.size else None
+            point = V.tabulate_dof_coordinates()[bad[0]] if bad.size else None
             found = [x for x in self.comm.allgather(point) if x is not None]
             if found:
-                return f"{name} is negative or not a number near x = {found[0][0]}"
+                where = ", ".join(f"{c:.4g}" for c in found[0])
+                return f"{name} is negative or not a number near x = ({where})"
         return None
 
     def nodal(self, field: str, component: int | None = None) -> tuple[Matrix, Vector]:

@@ -14,12 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import dolfinx
-import dolfinx.fem.petsc
 import numpy as np
 import numpy.typing as npt
-import ufl
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from subdomain_contact.physics import BodyForms, Problem
 from subdomain_contact.scene import Interface, gather_rows, match_points
@@ -39,7 +36,6 @@ class MasterLayer:
         nodes: Number of master nodes.
         coordinates: Coordinates [m] of every master node, by global number, on every rank.
         channels: The scalar master fields, in master-vector order.
-        areas: Nodal area ∫_Γ φ_i ds [m^(d-1)] of every master node, by global number.
     """
 
     interface: Interface
@@ -47,7 +43,6 @@ class MasterLayer:
     nodes: int
     coordinates: npt.NDArray[np.float64]
     channels: tuple[Channel, ...]
-    areas: npt.NDArray[np.float64]
 
     @property
     def size(self) -> int:
@@ -65,11 +60,7 @@ def master_layer(problem: Problem, interface: Interface) -> MasterLayer:
     index_map = V.dofmap.index_map
     owned = gather_rows(V.mesh.comm, V.tabulate_dof_coordinates()[: index_map.size_local])
     channels = channels_of(problem, interface.name, owned)
-    area = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(ufl.TestFunction(V) * ufl.dx))
-    area.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
-    areas = gather_rows(V.mesh.comm, area.array[: index_map.size_local].copy())
-    area.destroy()
-    return MasterLayer(interface, V, index_map.size_global, owned, tuple(channels), areas)
+    return MasterLayer(interface, V, index_map.size_global, owned, tuple(channels))
 
 
 def channels_of(problem: Problem, k: str, coordinates: npt.NDArray[np.float64]) -> list[Channel]:

@@ -176,7 +176,7 @@ def contact_fields(system: System) -> dict[str, dict[str, Vector]]:
     out = {}
     for k, layer in system.layers.items():
         first, second = (sides[name][k] for name in layer.interface.bodies)
-        area = layer.areas
+        area = first["area"][: layer.nodes]
         fields: dict[str, Vector] = {"coordinates": layer.coordinates, "area": area}
         for c, (field, _) in enumerate(layer.channels):
             part = slice(c * layer.nodes, (c + 1) * layer.nodes)
@@ -323,8 +323,9 @@ def _across(system: System, k: str, field: str, component: int | None) -> float:
 def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dict[str, dict]]:
     """Body -> interface -> the body's side of it, in master order, on every rank.
 
-    Each side: ``values`` at the slaves, ``outflow`` (:meth:`Body.contact_outflow`) and
-    ``normal`` (nodal ∫ n_c φ_i ds of the displacement channels).
+    Each side: ``values`` at the slaves, ``outflow`` (:meth:`Body.contact_outflow`), ``area``
+    (nodal ∫ φ_i ds, on every channel) and ``normal`` (nodal ∫ n_c φ_i ds of the
+    displacement channels).
     """
     local = {}
     for name, body in system.bodies.items():
@@ -333,14 +334,18 @@ def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dic
             if interfaces is not None and k not in interfaces:
                 continue
             layer = body.layers[k]
+            ds = body.forms.ds(body.forms.tags[k])
+            v = _split(body, ufl.TestFunction(body.forms.W))
+            first = v[body.forms.fields[0]]  # any field: each channel has the same nodes
+            first = first if first.ufl_shape == () else first[0]
             side = {
                 "values": body.slaves[k].gather(body.U.x.array, layer.size, body.comm),
                 "outflow": body.contact_outflow(k),
+                "area": body._gathered(dolfinx.fem.form(first * ds), k),
             }
             if "displacement" in body.forms.fields:
                 n = ufl.FacetNormal(body.forms.W.mesh)
-                v = _split(body, ufl.TestFunction(body.forms.W))["displacement"]
-                form = ufl.dot(n, v) * body.forms.ds(body.forms.tags[k])
+                form = ufl.dot(n, v["displacement"]) * ds
                 side["normal"] = body._gathered(dolfinx.fem.form(form), k)
             local[name][k] = side
     return system.everywhere(local)
