@@ -34,16 +34,9 @@ def collect_garbage(comm):
     communicators do not run out.
     """
     yield
-    import gc
+    from helpers import release
 
-    from helpers import SYSTEMS
-    from petsc4py import PETSc
-
-    for system in SYSTEMS:
-        system.destroy()
-    SYSTEMS.clear()
-    gc.collect()
-    PETSc.garbage_cleanup(comm)
+    release(comm)
 
 
 @pytest.fixture

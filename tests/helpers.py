@@ -9,6 +9,24 @@ import subdomain_contact as sc
 SYSTEMS: list[sc.System] = []
 
 
+def release(comm) -> None:
+    """Destroy the systems the helpers made, collect the rest (collective on ``comm``).
+
+    Between the tests (conftest), and inside a test that builds many large scenes: MPI has
+    2048 communicators per process, and each body's mesh and spaces hold a few until
+    Python frees them.
+    """
+    import gc
+
+    from petsc4py import PETSc
+
+    for system in SYSTEMS:
+        system.destroy()
+    SYSTEMS.clear()
+    gc.collect()
+    PETSc.garbage_cleanup(comm)
+
+
 def make_system(problem, **options):
     """A system destroyed after the current test."""
     system = sc.System(problem, **options)
