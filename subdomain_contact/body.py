@@ -690,9 +690,9 @@ class Body:
 
     def master_residual(self, k: str) -> Vector:
         """This body's share ``r_k`` of the master residual of k at the current state."""
-        return -self._gathered(self.F_fluxes[k], k)
+        return -self.assembled_at_slaves(self.F_fluxes[k], k)
 
-    def _gathered(self, form: dolfinx.fem.Form, k: str) -> Vector:
+    def assembled_at_slaves(self, form: dolfinx.fem.Form, k: str) -> Vector:
         """A vector form assembled on the body, at the slave DOFs of k in master order."""
         b = dolfinx.fem.petsc.assemble_vector(form)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
@@ -722,7 +722,7 @@ class Body:
         b.destroy()
         if load is not None:
             rest = rest - load
-        return np.where(use_link, self._gathered(self.F_links[k], k), -rest)
+        return np.where(use_link, self.assembled_at_slaves(self.F_links[k], k), -rest)
 
     def set_masters(self, masters: MasterValues) -> None:
         """Write replicated master vectors into the body's master Functions."""

@@ -367,20 +367,15 @@ class Problem:
             if (FIELD_OF[type(bc)] == field_name and isinstance(bc, Temperature | Potential))
             or (isinstance(bc, Convection) and bc.coefficient > 0 and field_name == "temperature")
         }
-        group = {name: {name} for name in scene.bodies}
-        for k, interface in scene.interfaces.items():
-            if not self.insulating(k, field_name):
-                merged = group[interface.bodies[0]] | group[interface.bodies[1]]
-                for name in merged:
-                    group[name] = merged
-        condition = "temperature or convection" if field_name == "temperature" else "potential"
-        for members in {frozenset(g) for g in group.values()}:
-            if not any(anchors & set(scene.bodies[n].boundaries) for n in members):
-                raise ValueError(
-                    f"{scene.source}: bodies {sorted(members)} have no {condition} condition "
-                    f"and no conducting contact leads to one: their {field_name} is defined "
-                    "only up to a constant"
-                )
+        joining = [k for k in scene.interfaces if not self.insulating(k, field_name)]
+        members = scene.unanchored(joining, anchors)
+        if members is not None:
+            condition = "temperature or convection" if field_name == "temperature" else "potential"
+            raise ValueError(
+                f"{scene.source}: bodies {members} have no {condition} condition and no "
+                f"conducting contact leads to one: their {field_name} is defined only up to "
+                "a constant"
+            )
 
 
 @dataclass

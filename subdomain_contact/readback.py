@@ -76,7 +76,7 @@ def force(system: System, group: str) -> Vector:
     Across an interface: the force the first body exerts on the second, in the components
     the contact carries (the normal one alone when it slides freely).
     """
-    dim = system.problem.scene.bodies[next(iter(system.problem.scene.bodies))].mesh.geometry.dim
+    dim = next(iter(system.problem.scene.bodies.values())).mesh.geometry.dim
     return np.array([_flow(system, group, "displacement", c) for c in range(dim)])
 
 
@@ -341,12 +341,12 @@ def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dic
             side = {
                 "values": body.slaves[k].gather(body.U.x.array, layer.size, body.comm),
                 "outflow": body.contact_outflow(k),
-                "area": body._gathered(dolfinx.fem.form(first * ds), k),
+                "area": body.assembled_at_slaves(dolfinx.fem.form(first * ds), k),
             }
             if "displacement" in body.forms.fields:
                 n = ufl.FacetNormal(body.forms.W.mesh)
                 form = ufl.dot(n, v["displacement"]) * ds
-                side["normal"] = body._gathered(dolfinx.fem.form(form), k)
+                side["normal"] = body.assembled_at_slaves(dolfinx.fem.form(form), k)
             local[name][k] = side
     return system.everywhere(local)
 

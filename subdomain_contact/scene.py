@@ -10,7 +10,7 @@ master mesh: a conforming copy of its facets, checked node by node against both 
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,6 +109,23 @@ class Scene:
                     f"{self.source}: give one {kind} entry for each of {sorted(known)}, "
                     f"got {sorted(given)}"
                 )
+
+    def unanchored(self, joining: Iterable[str], anchors: set[str]) -> list[str] | None:
+        """The first set of bodies (sorted names) that no anchor holds, or None.
+
+        Bodies join through the interfaces ``joining``; a set is held where one of its
+        bodies has a boundary group in ``anchors``.
+        """
+        group = {name: {name} for name in self.bodies}
+        for k in joining:
+            first, second = self.interfaces[k].bodies
+            merged = group[first] | group[second]
+            for name in merged:
+                group[name] = merged
+        for members in {frozenset(g) for g in group.values()}:
+            if not any(anchors & set(self.bodies[n].boundaries) for n in members):
+                return sorted(members)
+        return None
 
     @property
     def shared(self) -> bool:

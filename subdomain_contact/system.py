@@ -111,26 +111,24 @@ class System:
         scene = self.problem.scene
         dim = next(iter(scene.bodies.values())).mesh.geometry.dim
         for component in range(dim):
-            group = {name: {name} for name in scene.bodies}
-            for k, layer in self.layers.items():
-                if ("displacement", component) in layer.channels:
-                    first, second = scene.interfaces[k].bodies
-                    merged = group[first] | group[second]
-                    for name in merged:
-                        group[name] = merged
+            joining = [
+                k
+                for k, layer in self.layers.items()
+                if ("displacement", component) in layer.channels
+            ]
             held = {
                 bc.boundary
                 for bc in self.problem.conditions
                 if isinstance(bc, Displacement) and bc.component == component
             }
-            for members in {frozenset(g) for g in group.values()}:
-                if not any(held & set(scene.bodies[n].boundaries) for n in members):
-                    raise ValueError(
-                        f"{scene.source}: bodies {sorted(members)} have no Displacement "
-                        f"condition on component {component} ({'xyz'[component]}) and no "
-                        "contact carries it to one: they may move freely along that axis "
-                        "(hold a point or a symmetry plane, or make a contact stuck)"
-                    )
+            members = scene.unanchored(joining, held)
+            if members is not None:
+                raise ValueError(
+                    f"{scene.source}: bodies {members} have no Displacement condition on "
+                    f"component {component} ({'xyz'[component]}) and no contact carries it to "
+                    "one: they may move freely along that axis (hold a point or a symmetry "
+                    "plane, or make a contact stuck)"
+                )
 
     # -- layout ---------------------------------------------------------------------------
     def _floats(self, body: Body) -> bool:
