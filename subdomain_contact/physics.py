@@ -155,8 +155,9 @@ class Contact:
     open_stiffness: float = 1e-9
 
 
-#: Dirichlet data: a number, or a function of the points ``x`` (shape ``(3, n)``, m) that
-#: returns the ``n`` values (dolfinx's interpolation convention).
+#: Dirichlet data: a number, or a function of the points ``x`` that returns the values: of
+#: numpy arrays (``x`` of shape ``(3, n)`` [m], dolfinx's interpolation convention) or of UFL
+#: (``x`` the spatial coordinate, e.g. ``lambda x: 300 + 20 * ufl.sin(ufl.pi * x[1])``).
 Data = float | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 
 
@@ -664,8 +665,7 @@ def _dirichlet(
             held.append(bc)
             continue
         Vc = V if V is W else V.collapse()[0]
-        data = dolfinx.fem.Function(Vc)
-        data.interpolate(bc.value)
+        data = _interpolated(bc.value, Vc, f"{problem.scene.source}: boundary '{bc.boundary}'")
         if V is W:
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             where, values = dofs, data.x.array[dofs]
@@ -686,3 +686,26 @@ def _dirichlet(
                 f"{type(bc).__name__} data = {found[0][0]} at x = {found[0][1]}: must be finite"
             )
     return bcs, held
+
+
+def _interpolated(value: Callable, V: dolfinx.fem.FunctionSpace, what: str) -> dolfinx.fem.Function:
+    """A function of the points as a Function on V.
+
+    As numpy (dolfinx's interpolation convention) or, where that fails, as UFL of the
+    spatial coordinate.
+    """
+    data = dolfinx.fem.Function(V)
+    try:
+        data.interpolate(value)
+        return data
+    except Exception as numpy_error:
+        try:
+            expr = value(ufl.SpatialCoordinate(V.mesh))
+            data.interpolate(dolfinx.fem.Expression(expr, V.element.interpolation_points))
+            return data
+        except Exception as ufl_error:
+            raise ValueError(
+                f"{what}: Dirichlet data must be a number or a function of the points x, of "
+                f"numpy arrays (shape (3, n)) or of ufl.SpatialCoordinate; as numpy: "
+                f"{numpy_error!r}; as UFL: {ufl_error!r}"
+            ) from ufl_error

@@ -57,12 +57,21 @@ class System:
         if "displacement" in problem.fields:
             self._check_held_in_place()
         self.bodies: dict[str, Body] = {}
+        failure: ValueError | None = None
         for name, body in scene.bodies.items():
             if scene.is_local(name):
                 mine = {i.name: self.layers[i.name] for i in scene.interfaces_of(name)}
-                self.bodies[name] = Body(
-                    problem, body, mine, prefix=f"{prefix}body_{name}_", schur=schur
-                )
+                try:  # bad data is refused on every rank of the body: tell the other groups
+                    self.bodies[name] = Body(
+                        problem, body, mine, prefix=f"{prefix}body_{name}_", schur=schur
+                    )
+                except ValueError as error:
+                    failure = error
+                    break
+        messages = [m for m in self.comm.allgather(failure and str(failure)) if m]
+        if messages:
+            self.destroy()
+            raise failure or ValueError(messages[0])
         self.masters = {k: np.zeros(n) for k, n in self.sizes.items()}
         self.master_fields = {
             k: np.array([FIELDS.index(layer.channels[c][0]) for c in layer.field_index()])

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import ufl
 from helpers import linear_solve, make_system, monolithic, snapshot
 
 import subdomain_contact as sc
@@ -154,7 +155,6 @@ def test_temperature_data_as_a_function_of_x(plates):
 def l2_error(system, exact) -> float:
     """‖T_h − T‖ / ‖T‖ in L² over every body (exact: ``(x, y) -> (T_A, T_B)`` in UFL)."""
     import dolfinx
-    import ufl
     from mpi4py import MPI
 
     sums = np.zeros(2)
@@ -171,7 +171,8 @@ def l2_error(system, exact) -> float:
 @pytest.mark.parametrize("dim", [2, 3])
 def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
     """Manufactured solution: the 1D solution plus a harmonic mode cos(κy) X(x) that crosses
-    the contact (both of its conditions hold), imposed by functions of x on both ends.
+    the contact (both of its conditions hold), imposed by functions of x on both ends
+    (numpy in 2D, UFL in 3D).
 
     P1 converges as h² in L². Three meshes halving h; the rate of the finer pair is 2 up to
     the pre-asymptotic term O((κh)²) of the coarse pair (κh = 0.39 in 2D, 0.79 in 3D):
@@ -182,9 +183,10 @@ def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
     plates = TwoPlates(length, length, 1.0, 2.0, 10.0, 300.0, 320.0)
     exact = WavyPlates(plates, width, amplitude=5.0)
 
-    def data(x):
-        a, b = exact.temperature(x[0], x[1])
-        return np.where(x[0] <= length, a, b)
+    def data(x):  # numpy in 2D, UFL of the spatial coordinate in 3D: both kinds of data
+        if dim == 2:
+            return np.where(x[0] <= length, *exact.temperature(x[0], x[1]))
+        return ufl.conditional(ufl.le(x[0], length), *exact.temperature(x[0], x[1], module=ufl))
 
     errors = []
     for refinement in (1, 2, 4):
@@ -207,9 +209,11 @@ def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
     assert errors[-1] < 1e-2
 
 
-def test_dirichlet_data_that_is_not_finite_is_refused(plates):
+@pytest.mark.parametrize("placement", ["shared", "groups"])
+def test_dirichlet_data_that_is_not_finite_is_refused(comm, placement):
+    """Refused on every rank, also those of the group that does not hold plate A."""
     problem = sc.Problem(
-        plates,
+        two_plates_scene(4, 4, comm=comm, placement=placement),
         {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)},
         {"contact": sc.Contact(conductance=1.0)},
         [sc.Temperature("left", lambda x: np.where(x[1] > 0.5, np.nan, 300.0))],
