@@ -34,7 +34,7 @@ def assert_balanced(readback, bound=1e-8):
 
     The imbalance is the sum of what Newton leaves at the free DOFs and masters (below rtol
     ≤ 1e-10 of each field's scale in 2-norm): over the n < 2000 DOFs of a small demo, at
-    most √n rtol ≈ 4.5e-9. Measured ≤ 1e-12 on every demo.
+    most √n rtol ≈ 4.5e-9. Measured ≤ 7e-15 on every demo (joule_stack, coupled).
     """
     balance = readback["balance"]
     assert balance, "no balance in the report"
