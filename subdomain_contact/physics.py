@@ -100,9 +100,9 @@ class Penalty:
 
     stiffness: float
 
-    def __call__(self, closure: Expr) -> Expr:
-        """Pressure [Pa] at closure δ ≥ 0 [m]."""
-        return self.stiffness * closure
+    def __call__(self, closure: Expr, constant: Callable[[float], Expr] = float) -> Expr:
+        """Pressure [Pa] at closure δ ≥ 0 [m]; ``constant`` makes its numbers coefficients."""
+        return constant(self.stiffness) * closure
 
 
 @dataclass(frozen=True)
@@ -117,9 +117,10 @@ class ExponentialClosure:
     stiffness: float
     closure: float
 
-    def __call__(self, closure: Expr) -> Expr:
-        """Pressure [Pa] at closure δ ≥ 0 [m]."""
-        return self.stiffness * self.closure * (ufl.exp(closure / self.closure) - 1.0)
+    def __call__(self, closure: Expr, constant: Callable[[float], Expr] = float) -> Expr:
+        """Pressure [Pa] at closure δ ≥ 0 [m]; ``constant`` makes its numbers coefficients."""
+        k, d = constant(self.stiffness), constant(self.closure)
+        return k * d * (ufl.exp(closure / d) - 1.0)
 
 
 NormalLaw = Penalty | ExponentialClosure
@@ -591,7 +592,7 @@ def _half_link(
     if "displacement" in jump:
         j = jump["displacement"]
         closure = 2.0 * ufl.dot(j, n) - constant(c.gap)  # of the whole contact, per side
-        pressure = c.normal(ufl.max_value(closure, 0.0))
+        pressure = c.normal(ufl.max_value(closure, 0.0), constant)
         body += pressure * ufl.dot(n, v["displacement"])
         stretch = ufl.conditional(ufl.le(closure, 0.0), closure, 0.0)
         # at most 1e-3 of the body's own stiffness (open_stiffness ≤ 1e-9): a Newton matrix

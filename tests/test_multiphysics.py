@@ -289,6 +289,55 @@ def test_a_body_free_to_slide_is_refused(bars):
         make_system(problem)
 
 
+def test_a_sweep_compiles_its_forms_once(bars, monkeypatch):
+    """Five contact conductances, penalties and wall temperatures: every number is a form
+    coefficient, so the forms of the first scene serve the four others (no new code).
+
+    Counted by the signatures ffcx computes for what it is asked to compile (a cached module
+    is asked for, and counted, too): the later scenes ask for nothing the first did not.
+    """
+    import ffcx.naming
+
+    asked: list[str] = []
+    signature = ffcx.naming.compute_signature
+
+    def record(*args, **kwargs):
+        asked.append(signature(*args, **kwargs))
+        return asked[-1]
+
+    monkeypatch.setattr(ffcx.naming, "compute_signature", record)
+    steel = Material(
+        conductivity=45.0, young=200e9, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
+    )
+    signatures = []
+    for h, penalty, wall in zip(
+        [1e-2, 1.0, 1e3, 1e6, 1e10],
+        [1e9, 1e10, 1e11, 1e12, 1e13],
+        [250, 300, 320, 350, 400],
+        strict=True,
+    ):
+        asked.clear()
+        problem = Problem(
+            bars,
+            {"plate_A": steel, "plate_B": steel},
+            {"contact": Contact(conductance=h, normal=Penalty(penalty), gap=1e-5)},
+            [
+                Temperature("left", float(wall)),
+                Temperature("right", 300.0),
+                Displacement("left", 0, 0.0),
+                Displacement("right", 0, 0.0),
+                Displacement("bottom", 1, 0.0),
+            ],
+        )
+        system = make_system(problem)
+        system.reset({"temperature": 300.0})
+        sc.solve(system, rtol=1e-10)
+        sc.summary(system)
+        signatures.append(set(asked))
+    assert signatures[0]  # the first scene compiled (or found in the cache) its forms
+    assert all(later <= signatures[0] for later in signatures[1:])
+
+
 def test_power_law_refuses_a_zero_floor():
     with pytest.raises(ValueError, match="floor"):
         laws.PowerLaw(scale=1.0, hardness=1e6, exponent=0.9, floor=0.0)
