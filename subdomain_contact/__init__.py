@@ -6,7 +6,8 @@ and ``physics`` (materials, contact laws, conditions, UFL residuals per body) �
 contact DOFs left as a Schur block: ``schur``) → ``system`` (every body and master, the
 state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteration: fixed point
 or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) →
-``readback`` (integrals by group, contact fields, balances) and ``io`` (VTK).
+``transient`` (backward Euler steps) → ``readback`` (integrals by group, contact fields,
+balances) and ``io`` (VTK).
 Import ``dolfinx_solver`` before this package (this module does it).
 """
 
@@ -50,6 +51,7 @@ from subdomain_contact.subdomain import (
     Tolerance,
 )
 from subdomain_contact.system import System
+from subdomain_contact.transient import advance
 
 __all__ = [
     "CG_GAMG",
@@ -81,6 +83,7 @@ __all__ = [
     "Table",
     "Temperature",
     "Tolerance",
+    "advance",
     "average",
     "balance",
     "contact_fields",

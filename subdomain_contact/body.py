@@ -212,6 +212,10 @@ class Body:
             (len(self.kept),) * 2))  # fmt: skip
         self.L_bc = (free @ self.L @ free).tocsr()
 
+    def bulk_changed(self) -> None:
+        """The bulk's data changed (a new time step): assemble and factorise it again."""
+        self._bulk_step = -1
+
     def bulk_matrix(self) -> PETSc.Mat:
         """``A_bulk`` with the Dirichlet conditions at the current state.
 

@@ -342,9 +342,7 @@ def _newton(
     """One Newton run with one line search, from the system's current state."""
     callbacks = _Callbacks(system, linear, rtol, max_it, monitor, lag_jacobian)
     x, f = system.create_vector(), system.create_vector()
-    system.get_state(x)
     callbacks.scale = _cold_residuals(system, f)
-    system.set_state(x)
     system.apply_conditions()
     system.get_state(x)
     sizes = (x.getLocalSize(), x.getSize())
@@ -401,7 +399,5 @@ def _ratio(a: float, b: float) -> float:
 
 def _cold_residuals(system: System, f: PETSc.Vec) -> dict[str, float]:
     """Each field's residual norm with every unknown zero but the Dirichlet values."""
-    system.reset()
-    system.apply_conditions()
-    system.residual(f)
+    system.cold_residual(f)
     return system.field_norms(f)

@@ -78,6 +78,9 @@ class Material:
         reference_temperature: Temperature [K] of zero thermal strain; required with
             ``expansion``.
         heat_source: Volumetric heat source [W/m^3] (besides Joule heat).
+        density: ρ [kg/m^3], with ``heat_capacity``: the body stores heat in a transient
+            (:mod:`subdomain_contact.transient`); without them it has no thermal inertia.
+        heat_capacity: c_p(T) [J/(kg K)]: a number or a law ``(p, T)``.
     """
 
     conductivity: float | Law | None = None
@@ -87,6 +90,8 @@ class Material:
     expansion: float = 0.0
     reference_temperature: float | None = None
     heat_source: float = 0.0
+    density: float | None = None
+    heat_capacity: float | Law | None = None
 
     def fields(self) -> tuple[str, ...]:
         """The fields this material needs."""
@@ -287,6 +292,14 @@ class Problem:
                 f"body '{name}': expansion = {m.expansion} needs reference_temperature, the "
                 "temperature [K] of zero thermal strain (for cast parts, their solidus)"
             )
+        if (m.density is None) != (m.heat_capacity is None):
+            raise ValueError(f"body '{name}': give density and heat_capacity together")
+        if m.density is not None:
+            check_finite(m.density, f"body '{name}': density", positive=True)
+            if m.conductivity is None:
+                raise ValueError(f"body '{name}': heat_capacity needs a conductivity (heat)")
+        if m.heat_capacity is not None and not callable(m.heat_capacity):
+            check_finite(m.heat_capacity, f"body '{name}': heat_capacity", positive=True)
         if not -1.0 < m.poisson < 0.5:
             raise ValueError(f"body '{name}': poisson = {m.poisson}: must lie in (-1, 0.5)")
 
@@ -409,6 +422,10 @@ class BodyForms:
         loads: Boundary group -> residual term of its flux and convection conditions (in
             ``bulk``).
         held: The condition of each of ``bcs``.
+        previous: The body's state at the previous time (transients).
+        rate: 1 / Δt [1/s] of the current time step; 0 for a steady state.
+        storage: The stored heat's residual term ρ c_p(T) (T − T_prev) / Δt v_T (in
+            ``bulk``), or None for a body without thermal inertia.
         laws: The conductivities and conductances (W/(m K), S/m, W/(m² K), S/m²) as UFL of
             the state, by name, each with the measure where it holds; they must stay ≥ 0.
     """
@@ -430,6 +447,9 @@ class BodyForms:
     loads: dict[str, ufl.Form]
     held: list[Condition]
     laws: dict[str, tuple[Expr, ufl.Measure]]
+    previous: dolfinx.fem.Function
+    rate: dolfinx.fem.Constant
+    storage: ufl.Form | None
     _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
@@ -498,7 +518,10 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     )
     laws = {f"{name} of body '{body.name}'": (law, ufl.dx) for name, law in material_laws.items()}
     loads = _neumann(problem, body, u, v, ds, constant)
-    for form in [sources, *loads.values()]:
+    previous = dolfinx.fem.Function(W, name=f"{body.name} previous")
+    rate = constant(0.0)
+    storage = _storage(problem.materials[body.name], u, _split(previous, fields), v, rate, constant)
+    for form in [sources, storage, *loads.values()]:
         if form is not None:
             bulk += form
     links, fluxes, remainders, ties = {}, {}, {}, {}
@@ -523,7 +546,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
         body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
-        ds, tags, sources, loads, held, laws,
+        ds, tags, sources, loads, held, laws, previous, rate, storage,
     )  # fmt: skip
 
 
@@ -565,6 +588,18 @@ def _bulk(
     bulk = sum((t * ufl.dx for t in terms[1:]), terms[0] * ufl.dx)
     heat = sum((t * ufl.dx for t in sources[1:]), sources[0] * ufl.dx) if sources else None
     return bulk, heat, laws
+
+
+def _storage(
+    m: Material, u: dict, previous: dict, v: dict, rate: Expr, constant: Callable[[float], Expr]
+) -> ufl.Form | None:
+    """ρ c_p(T) (T − T_prev) / Δt v_T [W/m^3] (backward Euler), or None without inertia."""
+    if m.density is None:
+        return None
+    T = u["temperature"]
+    capacity = _law(m.heat_capacity, constant)(ufl.as_ufl(0.0), T)
+    change = T - previous["temperature"]
+    return constant(m.density) * capacity * change * rate * v["temperature"] * ufl.dx
 
 
 def _half_link(

@@ -232,6 +232,43 @@ class System:
         for body in self.bodies.values():
             body.set_masters(self.masters)
 
+    def set_time_step(self, step: float) -> None:
+        """Take the next time step of ``step`` [s] (``inf``: a steady state), collective.
+
+        A body whose step changes has a new bulk matrix: its factorisation is made again at
+        the next Newton step, and kept while the step stays the same.
+        """
+        rate = 0.0 if step == np.inf else 1.0 / step
+        for body in self.bodies.values():
+            if body.forms.storage is not None and float(body.forms.rate.value) != rate:
+                body.forms.rate.value = rate
+                body.bulk_changed()
+
+    def keep_previous(self) -> None:
+        """The current state becomes the previous time's (before a time step)."""
+        for body in self.bodies.values():
+            body.forms.previous.x.array[:] = body.U.x.array
+
+    def cold_residual(self, f: PETSc.Vec) -> None:
+        """The residual into ``f`` at the cold state; the state is kept.
+
+        Cold: every unknown zero but the Dirichlet values, the previous time's state too (so
+        that it measures the loads, not the stored heat).
+        """
+        state = self.state()
+        previous = {n: b.forms.previous.x.array.copy() for n, b in self.bodies.items()}
+        try:
+            self.reset()
+            for body in self.bodies.values():
+                body.forms.previous.x.array[:] = 0.0
+            self.apply_conditions()
+            self.residual(f)
+        finally:
+            self.set_state(state)
+            for name, body in self.bodies.items():
+                body.forms.previous.x.array[:] = previous[name]
+            state.destroy()
+
     def apply_conditions(self) -> None:
         """Set every body's fixed DOFs to their prescribed values."""
         for body in self.bodies.values():
