@@ -6,7 +6,7 @@ and ``physics`` (materials, contact laws, conditions, UFL residuals per body) �
 contact DOFs left as a Schur block: ``schur``) → ``system`` (every body and master, the
 state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteration: fixed point
 or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) →
-``transient`` (backward Euler steps) → ``readback`` (integrals by group, contact fields,
+``transient`` (backward Euler and BDF2 steps) → ``readback`` (integrals by group, contact fields,
 balances) and ``io`` (VTK).
 Import ``dolfinx_solver`` before this package (this module does it).
 """
@@ -51,7 +51,7 @@ from subdomain_contact.subdomain import (
     Tolerance,
 )
 from subdomain_contact.system import System
-from subdomain_contact.transient import advance
+from subdomain_contact.transient import Stepper
 
 __all__ = [
     "CG_GAMG",
@@ -77,13 +77,13 @@ __all__ = [
     "Problem",
     "Result",
     "Scene",
+    "Stepper",
     "SubdomainConvergenceError",
     "Subdomains",
     "System",
     "Table",
     "Temperature",
     "Tolerance",
-    "advance",
     "average",
     "balance",
     "contact_fields",

@@ -422,10 +422,12 @@ class BodyForms:
         loads: Boundary group -> residual term of its flux and convection conditions (in
             ``bulk``).
         held: The condition of each of ``bcs``.
-        previous: The body's state at the previous time (transients).
-        rate: 1 / Δt [1/s] of the current time step; 0 for a steady state.
-        storage: The stored heat's residual term ρ c_p(T) (T − T_prev) / Δt v_T (in
-            ``bulk``), or None for a body without thermal inertia.
+        history: The body's states at the two previous times, latest first (transients).
+        rates: The time derivative's weights (r₀, r₁) [1/s]: ∂T/∂t ≈ r₀ (T − T₁) −
+            r₁ (T₁ − T₂) with T₁, T₂ the history (backward Euler: 1/Δt, 0; BDF2: see
+            :mod:`subdomain_contact.transient`); both 0 for a steady state.
+        storage: The stored heat's residual term ρ c_p(T) ∂T/∂t v_T (in ``bulk``), or None
+            for a body without thermal inertia.
         laws: The conductivities and conductances (W/(m K), S/m, W/(m² K), S/m²) as UFL of
             the state, by name, each with the measure where it holds; they must stay ≥ 0.
     """
@@ -447,8 +449,8 @@ class BodyForms:
     loads: dict[str, ufl.Form]
     held: list[Condition]
     laws: dict[str, tuple[Expr, ufl.Measure]]
-    previous: dolfinx.fem.Function
-    rate: dolfinx.fem.Constant
+    history: tuple[dolfinx.fem.Function, dolfinx.fem.Function]
+    rates: tuple[dolfinx.fem.Constant, dolfinx.fem.Constant]
     storage: ufl.Form | None
     _collapsed: dict = field(default_factory=dict, repr=False)
 
@@ -518,9 +520,10 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     )
     laws = {f"{name} of body '{body.name}'": (law, ufl.dx) for name, law in material_laws.items()}
     loads = _neumann(problem, body, u, v, ds, constant)
-    previous = dolfinx.fem.Function(W, name=f"{body.name} previous")
-    rate = constant(0.0)
-    storage = _storage(problem.materials[body.name], u, _split(previous, fields), v, rate, constant)
+    history = tuple(dolfinx.fem.Function(W, name=f"{body.name} at t-{i}") for i in (1, 2))
+    rates = (constant(0.0), constant(0.0))
+    past = [_split(f, fields) for f in history]
+    storage = _storage(problem.materials[body.name], u, past, v, rates, constant)
     for form in [sources, storage, *loads.values()]:
         if form is not None:
             bulk += form
@@ -546,7 +549,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
         body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
-        ds, tags, sources, loads, held, laws, previous, rate, storage,
+        ds, tags, sources, loads, held, laws, history, rates, storage,
     )  # fmt: skip
 
 
@@ -591,15 +594,20 @@ def _bulk(
 
 
 def _storage(
-    m: Material, u: dict, previous: dict, v: dict, rate: Expr, constant: Callable[[float], Expr]
+    m: Material,
+    u: dict,
+    past: list[dict],
+    v: dict,
+    rates: tuple[Expr, Expr],
+    constant: Callable[[float], Expr],
 ) -> ufl.Form | None:
-    """ρ c_p(T) (T − T_prev) / Δt v_T [W/m^3] (backward Euler), or None without inertia."""
+    """ρ c_p(T) [r₀ (T − T₁) − r₁ (T₁ − T₂)] v_T [W/m^3], or None without thermal inertia."""
     if m.density is None:
         return None
-    T = u["temperature"]
+    T, (T1, T2) = u["temperature"], (p["temperature"] for p in past)
     capacity = _law(m.heat_capacity, constant)(ufl.as_ufl(0.0), T)
-    change = T - previous["temperature"]
-    return constant(m.density) * capacity * change * rate * v["temperature"] * ufl.dx
+    change = rates[0] * (T - T1) - rates[1] * (T1 - T2)
+    return constant(m.density) * capacity * change * v["temperature"] * ufl.dx
 
 
 def _half_link(

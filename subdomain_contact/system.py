@@ -232,41 +232,46 @@ class System:
         for body in self.bodies.values():
             body.set_masters(self.masters)
 
-    def set_time_step(self, step: float) -> None:
-        """Take the next time step of ``step`` [s] (``inf``: a steady state), collective.
+    def set_rates(self, rates: tuple[float, float]) -> None:
+        """The time derivative's weights (r₀, r₁) [1/s] of the next step (0, 0: steady).
 
-        A body whose step changes has a new bulk matrix: its factorisation is made again at
-        the next Newton step, and kept while the step stays the same.
+        A body whose weights change has a new bulk matrix: it is factorised again at the next
+        Newton step, and kept while the weights stay the same (collective).
         """
-        rate = 0.0 if step == np.inf else 1.0 / step
         for body in self.bodies.values():
-            if body.forms.storage is not None and float(body.forms.rate.value) != rate:
-                body.forms.rate.value = rate
+            constants = body.forms.rates
+            if body.forms.storage is not None and tuple(float(c.value) for c in constants) != rates:
+                for c, value in zip(constants, rates, strict=True):
+                    c.value = value
                 body.bulk_changed()
 
     def keep_previous(self) -> None:
-        """The current state becomes the previous time's (before a time step)."""
+        """The current state becomes the previous time's, and that one the time before."""
         for body in self.bodies.values():
-            body.forms.previous.x.array[:] = body.U.x.array
+            latest, older = body.forms.history
+            older.x.array[:] = latest.x.array
+            latest.x.array[:] = body.U.x.array
 
     def cold_residual(self, f: PETSc.Vec) -> None:
         """The residual into ``f`` at the cold state; the state is kept.
 
-        Cold: every unknown zero but the Dirichlet values, the previous time's state too (so
+        Cold: every unknown zero but the Dirichlet values, the previous times' states too (so
         that it measures the loads, not the stored heat).
         """
         state = self.state()
-        previous = {n: b.forms.previous.x.array.copy() for n, b in self.bodies.items()}
+        history = {n: [h.x.array.copy() for h in b.forms.history] for n, b in self.bodies.items()}
         try:
             self.reset()
             for body in self.bodies.values():
-                body.forms.previous.x.array[:] = 0.0
+                for h in body.forms.history:
+                    h.x.array[:] = 0.0
             self.apply_conditions()
             self.residual(f)
         finally:
             self.set_state(state)
             for name, body in self.bodies.items():
-                body.forms.previous.x.array[:] = previous[name]
+                for h, values in zip(body.forms.history, history[name], strict=True):
+                    h.x.array[:] = values
             state.destroy()
 
     def apply_conditions(self) -> None:
