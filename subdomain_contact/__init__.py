@@ -30,6 +30,7 @@ from subdomain_contact.physics import (
     Penalty,
     Potential,
     Problem,
+    Schedule,
     Temperature,
 )
 from subdomain_contact.readback import (
@@ -77,6 +78,7 @@ __all__ = [
     "Problem",
     "Result",
     "Scene",
+    "Schedule",
     "Stepper",
     "SubdomainConvergenceError",
     "Subdomains",

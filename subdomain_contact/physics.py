@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import basix.ufl
 import dolfinx
@@ -55,6 +56,7 @@ __all__ = [
     "Penalty",
     "Potential",
     "Problem",
+    "Schedule",
     "Temperature",
     "body_forms",
 ]
@@ -161,10 +163,61 @@ class Contact:
     open_stiffness: float = 1e-9
 
 
+@dataclass(frozen=True)
+class Schedule:
+    """A value that changes in time: piecewise linear through (time [s], value) points.
+
+    Held at its first and last values outside them (a current ramp, a measured history).
+    Give it as the value of a condition (or a convection's ambient); each time step takes
+    its value at the step's end (:class:`~subdomain_contact.transient.Stepper`).
+    """
+
+    times: tuple[float, ...]
+    values: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        times, values = np.asarray(self.times, float), np.asarray(self.values, float)
+        if times.ndim != 1 or times.shape != values.shape or times.size == 0:
+            raise ValueError("Schedule: as many times as values, at least one")
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
+            raise ValueError("Schedule: times and values must be finite")
+        if np.any(np.diff(times) <= 0):
+            raise ValueError(f"Schedule: times must increase strictly, got {self.times}")
+
+    def at(self, time: float) -> float:
+        """The value at ``time`` [s]."""
+        return float(np.interp(time, self.times, self.values))
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> Schedule:
+        """Read ``time,value`` rows (times in s; a first line that is not numbers is a header).
+
+        Raises:
+            ValueError: A row that is not two numbers, naming the file and the line.
+        """
+        rows = []
+        lines = Path(path).read_text().splitlines()
+        for number, line in enumerate(lines, start=1):
+            if not line.strip():
+                continue
+            try:
+                time, value = (float(field) for field in line.split(","))
+            except ValueError:
+                if number == 1:
+                    continue  # a header
+                raise ValueError(f"{path}:{number}: expected 'time,value', got {line!r}") from None
+            rows.append((time, value))
+        if not rows:
+            raise ValueError(f"{path}: no 'time,value' rows")
+        times, values = zip(*rows, strict=True)
+        return cls(times, values)
+
+
 #: Dirichlet data: a number, or a function of the points ``x`` that returns the values: of
 #: numpy arrays (``x`` of shape ``(3, n)`` [m], dolfinx's interpolation convention) or of UFL
 #: (``x`` the spatial coordinate, e.g. ``lambda x: 300 + 20 * ufl.sin(ufl.pi * x[1])``).
-Data = float | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+#: Or a :class:`Schedule` of time.
+Data = float | Schedule | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 
 
 @dataclass(frozen=True)
@@ -180,7 +233,7 @@ class HeatFlux:
     """Neumann condition: heat flux [W/m^2] *into* the body through a boundary group."""
 
     boundary: str
-    value: float
+    value: float | Schedule
 
 
 @dataclass(frozen=True)
@@ -189,7 +242,7 @@ class Convection:
 
     boundary: str
     coefficient: float
-    ambient: float
+    ambient: float | Schedule
 
 
 @dataclass(frozen=True)
@@ -205,7 +258,7 @@ class CurrentDensity:
     """Neumann condition: current density [A/m^2] *into* the body through a boundary group."""
 
     boundary: str
-    value: float
+    value: float | Schedule
 
 
 @dataclass(frozen=True)
@@ -349,7 +402,8 @@ class Problem:
                     f"{FIELD_OF[type(bc)]} field, which no material defines"
                 )
             for attr in ("value", "coefficient", "ambient"):
-                if hasattr(bc, attr) and not callable(getattr(bc, attr)):
+                value = getattr(bc, attr, None)
+                if value is not None and not callable(value) and not isinstance(value, Schedule):
                     check_finite(getattr(bc, attr), f"boundary '{bc.boundary}': {attr}")
             if callable(getattr(bc, "value", None)) and not isinstance(
                 bc, Temperature | Potential | Displacement
@@ -428,6 +482,7 @@ class BodyForms:
             :mod:`subdomain_contact.transient`); both 0 for a steady state.
         storage: The stored heat's residual term ρ c_p(T) ∂T/∂t v_T (in ``bulk``), or None
             for a body without thermal inertia.
+        timed: The coefficients that follow a :class:`Schedule` of time, with it.
         laws: The conductivities and conductances (W/(m K), S/m, W/(m² K), S/m²) as UFL of
             the state, by name, each with the measure where it holds; they must stay ≥ 0.
     """
@@ -452,6 +507,7 @@ class BodyForms:
     history: tuple[dolfinx.fem.Function, dolfinx.fem.Function]
     rates: tuple[dolfinx.fem.Constant, dolfinx.fem.Constant]
     storage: ufl.Form | None
+    timed: list[tuple[dolfinx.fem.Constant, Schedule]]
     _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
@@ -519,7 +575,16 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         problem.materials[body.name], u, v, mesh.geometry.dim, constant
     )
     laws = {f"{name} of body '{body.name}'": (law, ufl.dx) for name, law in material_laws.items()}
-    loads = _neumann(problem, body, u, v, ds, constant)
+    timed: list[tuple[dolfinx.fem.Constant, Schedule]] = []
+
+    def data(value: float | Schedule) -> dolfinx.fem.Constant:
+        """A form coefficient; a schedule's follows the time (starting at t = 0)."""
+        if not isinstance(value, Schedule):
+            return constant(value)
+        timed.append((constant(value.at(0.0)), value))
+        return timed[-1][0]
+
+    loads = _neumann(problem, body, u, v, ds, data)
     history = tuple(dolfinx.fem.Function(W, name=f"{body.name} at t-{i}") for i in (1, 2))
     rates = (constant(0.0), constant(0.0))
     past = [_split(f, fields) for f in history]
@@ -545,11 +610,11 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         ties[i.name] = None if tie is None else tie * dS
         flux = link if joule is None else link - joule
         fluxes[i.name] = (flux if tie is None else flux + tie) * dS
-    bcs, held = _dirichlet(problem, body, W, fields)
+    bcs, held = _dirichlet(problem, body, W, fields, data)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
         body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
-        ds, tags, sources, loads, held, laws, history, rates, storage,
+        ds, tags, sources, loads, held, laws, history, rates, storage, timed,
     )  # fmt: skip
 
 
@@ -667,7 +732,7 @@ def _neumann(
     u: dict,
     v: dict,
     ds: ufl.Measure,
-    constant: Callable[[float], Expr],
+    constant: Callable[[float | Schedule], Expr],
 ) -> dict[str, ufl.Form]:
     """Boundary fluxes and convection [W, A], by boundary group."""
     forms: dict[str, ufl.Form] = {}
@@ -689,7 +754,11 @@ def _neumann(
 
 
 def _dirichlet(
-    problem: Problem, body: Body, W: dolfinx.fem.FunctionSpace, fields: tuple[str, ...]
+    problem: Problem,
+    body: Body,
+    W: dolfinx.fem.FunctionSpace,
+    fields: tuple[str, ...],
+    constant: Callable[[float | Schedule], Expr],
 ) -> tuple[list[dolfinx.fem.DirichletBC], list[Condition]]:
     """The body's Dirichlet conditions, and the condition each one comes from."""
     bcs, held = [], []
@@ -703,6 +772,11 @@ def _dirichlet(
         if isinstance(bc, Displacement):
             V = V.sub(bc.component)
         facets = body.facet_tags.find(body.boundaries[bc.boundary])
+        if isinstance(bc.value, Schedule):
+            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+            bcs.append(dolfinx.fem.dirichletbc(constant(bc.value), dofs, V))
+            held.append(bc)
+            continue
         if not callable(bc.value):
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             bcs.append(dolfinx.fem.dirichletbc(np.float64(bc.value), dofs, V))

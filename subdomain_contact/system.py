@@ -245,6 +245,12 @@ class System:
                     c.value = value
                 body.bulk_changed()
 
+    def set_time(self, time: float) -> None:
+        """Conditions that follow a ``Schedule`` take their values at ``time`` [s]."""
+        for body in self.bodies.values():
+            for coefficient, schedule in body.forms.timed:
+                coefficient.value = schedule.at(time)
+
     def keep_previous(self) -> None:
         """The current state becomes the previous time's, and that one the time before."""
         for body in self.bodies.values():

@@ -48,6 +48,7 @@ class Stepper:
     def __post_init__(self) -> None:
         if self.scheme not in SCHEMES:
             raise ValueError(f"scheme = {self.scheme!r}: one of {SCHEMES}")
+        self.system.set_time(self.time)
 
     def advance(self, step: float, linear=None, **options) -> Result:
         """One step of ``step`` [s]; Newton starts from the current state.
@@ -63,6 +64,7 @@ class Stepper:
         if not 0.0 < step < float("inf"):
             raise ValueError(f"advance: step = {step!r} s: must be a finite number > 0")
         self.system.set_rates(self.rates(step))
+        self.system.set_time(self.time + step)  # the conditions at the step's end
         self.system.keep_previous()
         result = solve(self.system, linear, **options)
         self.time, self.steps, self._last = self.time + step, self.steps + 1, step
