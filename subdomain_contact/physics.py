@@ -59,6 +59,7 @@ __all__ = [
     "Schedule",
     "Temperature",
     "body_forms",
+    "split_fields",
 ]
 
 #: Every field a body can carry, in the order of its mixed space.
@@ -534,7 +535,8 @@ class BodyForms:
         return self._collapsed[name, component]
 
 
-def _split(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:
+def split_fields(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:
+    """The parts of a Function or test function of a body's space, by field name."""
     if len(fields) == 1:
         return {fields[0]: w}
     return dict(zip(fields, ufl.split(w), strict=True))
@@ -569,7 +571,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     U = dolfinx.fem.Function(W, name=body.name)
     interfaces = problem.scene.interfaces_of(body.name)
     masters = {i.name: dolfinx.fem.Function(W, name=f"master {i.name}") for i in interfaces}
-    u, v = _split(U, fields), _split(ufl.TestFunction(W), fields)
+    u, v = split_fields(U, fields), split_fields(ufl.TestFunction(W), fields)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=body.facet_tags)
     bulk, sources, material_laws = _bulk(
         problem.materials[body.name], u, v, mesh.geometry.dim, constant
@@ -587,7 +589,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     loads = _neumann(problem, body, u, v, ds, data)
     history = tuple(dolfinx.fem.Function(W, name=f"{body.name} at t-{i}") for i in (1, 2))
     rates = (constant(0.0), constant(0.0))
-    past = [_split(f, fields) for f in history]
+    past = [split_fields(f, fields) for f in history]
     storage = _storage(problem.materials[body.name], u, past, v, rates, constant)
     for form in [sources, storage, *loads.values()]:
         if form is not None:
@@ -598,9 +600,9 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     stiffness = constant(young or 0.0) / ufl.CellDiameter(mesh)  # the bulk's, per area [Pa/m]
     for i in interfaces:
         Um = masters[i.name]
-        jump = {f: u[f] - um for f, um in _split(Um, fields).items()}
+        jump = {f: u[f] - um for f, um in split_fields(Um, fields).items()}
         link, joule, tie, contact_laws = _half_link(
-            problem.contacts[i.name], jump, _split(Um, fields), v, n, constant, stiffness
+            problem.contacts[i.name], jump, split_fields(Um, fields), v, n, constant, stiffness
         )
         dS = ds(i.tag)
         for name, law in contact_laws.items():

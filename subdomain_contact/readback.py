@@ -28,7 +28,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.body import Body
-from subdomain_contact.physics import FIELD_OF, Displacement
+from subdomain_contact.physics import FIELD_OF, Displacement, split_fields
 from subdomain_contact.system import System
 
 __all__ = [
@@ -58,7 +58,7 @@ CONTACT_UNITS = {
 
 def current(system: System, group: str) -> float:
     """Current [A] into the bodies through a boundary group, or across an interface."""
-    return float(_flow(system, group, "potential", None))
+    return float(_flow(_Reading(system), group, "potential", None))
 
 
 def heat(system: System, group: str) -> float:
@@ -67,7 +67,7 @@ def heat(system: System, group: str) -> float:
     Across an interface: the conducted part, the mean of what leaves the first body and
     what enters the second; the contact's Joule heat is in :func:`balance`.
     """
-    return float(_flow(system, group, "temperature", None))
+    return float(_flow(_Reading(system), group, "temperature", None))
 
 
 def force(system: System, group: str) -> Vector:
@@ -76,8 +76,12 @@ def force(system: System, group: str) -> Vector:
     Across an interface: the force the first body exerts on the second, in the components
     the contact carries (the normal one alone when it slides freely).
     """
-    dim = next(iter(system.problem.scene.bodies.values())).mesh.geometry.dim
-    return np.array([_flow(system, group, "displacement", c) for c in range(dim)])
+    return _force(_Reading(system), group)
+
+
+def _force(reading: _Reading, group: str) -> Vector:
+    dim = next(iter(reading.system.problem.scene.bodies.values())).mesh.geometry.dim
+    return np.array([_flow(reading, group, "displacement", c) for c in range(dim)])
 
 
 def average(system: System, group: str, field: str) -> float:
@@ -95,7 +99,7 @@ def average(system: System, group: str, field: str) -> float:
             continue
         ds = body.forms.ds(tag)
         one = dolfinx.fem.Constant(body.forms.W.mesh, 1.0)
-        forms = (_split(body, body.forms.U)[field] * ds, one * ds)
+        forms = (split_fields(body.forms.U, body.forms.fields)[field] * ds, one * ds)
         local = np.array([dolfinx.fem.assemble_scalar(dolfinx.fem.form(f)) for f in forms])
         totals += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     totals = system.comm.allreduce(totals, op=MPI.SUM)
@@ -128,13 +132,20 @@ def balance(system: System) -> dict[str, dict]:
     of any reaction. A scene where nothing flows (uniform temperature) then still has a
     meaningful relative imbalance.
     """
+    return _balance(_Reading(system))
+
+
+def _balance(reading: _Reading) -> dict[str, dict]:
+    system = reading.system
     out = {}
     problem = system.problem
     cold = _cold_loads(system)
     for name, field in (("heat", "temperature"), ("current", "potential")):
         if field not in problem.fields:
             continue
-        groups = {g: float(_flow(system, g, field, None)) for g in _condition_groups(system, field)}
+        groups = {
+            g: float(_flow(reading, g, field, None)) for g in _condition_groups(system, field)
+        }
         flows = np.array(list(groups.values()))
         generated = _generated(system) if field == "temperature" else 0.0
         stored = _stored(system) if field == "temperature" else 0.0
@@ -152,7 +163,7 @@ def balance(system: System) -> dict[str, dict]:
             "relative": abs(imbalance) / scale if scale > 0 else 0.0,
         }
     if "displacement" in problem.fields:
-        groups = {g: force(system, g) for g in _condition_groups(system, "displacement")}
+        groups = {g: _force(reading, g) for g in _condition_groups(system, "displacement")}
         total = np.sum(list(groups.values()), axis=0)
         scale = max(max(np.abs(f).sum() for f in groups.values()), cold["displacement"])
         out["force"] = {
@@ -176,10 +187,15 @@ def contact_fields(system: System) -> dict[str, dict[str, Vector]]:
     are nodal reactions over nodal areas: their sums times the areas are the integrals of
     :func:`heat`, :func:`current` and :func:`force` exactly.
     """
-    sides = _sides(system)
+    return _contact_fields(_Reading(system))
+
+
+def _contact_fields(reading: _Reading) -> dict[str, dict[str, Vector]]:
+    system = reading.system
     out = {}
     for k, layer in system.layers.items():
-        first, second = (sides[name][k] for name in layer.interface.bodies)
+        sides = reading.sides(k)
+        first, second = (sides[name] for name in layer.interface.bodies)
         area = first["area"][: layer.nodes]
         fields: dict[str, Vector] = {"coordinates": layer.coordinates, "area": area}
         for c, (field, _) in enumerate(layer.channels):
@@ -208,41 +224,61 @@ def summary(system: System) -> dict:
     and ``potential`` [V], where the scene has the field; ``contacts``: per interface, the
     current, heat and force across it, its contact Joule heat [W] and its mean pressure [Pa].
     """
+    reading = _Reading(system)
     fields = system.problem.fields
     groups: dict[str, dict] = {}
     for group in dict.fromkeys(bc.boundary for bc in system.problem.conditions):
         row = groups.setdefault(group, {})
         if "potential" in fields:
-            row["current"] = current(system, group)
+            row["current"] = float(_flow(reading, group, "potential", None))
             row["potential"] = average(system, group, "potential")
         if "temperature" in fields:
-            row["heat"] = heat(system, group)
+            row["heat"] = float(_flow(reading, group, "temperature", None))
             row["temperature"] = average(system, group, "temperature")
         if "displacement" in fields:
-            row["force"] = force(system, group).tolist()
+            row["force"] = _force(reading, group).tolist()
     contacts: dict[str, dict] = {}
-    nodal = contact_fields(system)
+    nodal = _contact_fields(reading)
     for k, values in nodal.items():
         area = values["area"]
         row = contacts.setdefault(k, {})
         if "potential" in fields:
-            row["current"] = current(system, k)
+            row["current"] = float(_flow(reading, k, "potential", None))
         if "temperature" in fields:
-            row["heat"] = heat(system, k)
+            row["heat"] = float(_flow(reading, k, "temperature", None))
         if "contact Joule heat" in values:
             row["Joule heat"] = float(np.sum(values["contact Joule heat"] * area))
         if "displacement" in fields:
-            row["force"] = force(system, k).tolist()
+            row["force"] = _force(reading, k).tolist()
             row["mean pressure"] = float(np.sum(values["pressure"] * area) / area.sum())
-    return {"balance": balance(system), "groups": groups, "contacts": contacts}
+    return {"balance": _balance(reading), "groups": groups, "contacts": contacts}
 
 
 # -- the pieces ---------------------------------------------------------------------------
-def _split(body: Body, w) -> dict:
-    fields = body.forms.fields
-    if len(fields) == 1:
-        return {fields[0]: w}
-    return dict(zip(fields, ufl.split(w), strict=True))
+class _Reading:
+    """One state of a system, read once (collective).
+
+    Each body's residual without its conditions and each interface's sides are assembled on
+    first use and kept: a report asks for them many times.
+    """
+
+    def __init__(self, system: System) -> None:
+        self.system = system
+        self._residuals: dict[str, Vector] = {}
+        self._sides: dict[str, dict[str, dict]] = {}
+
+    def residual(self, body: Body) -> Vector:
+        """The body's owned residual without its conditions (reactions at fixed DOFs)."""
+        if body.name not in self._residuals:
+            self._residuals[body.name] = body.residual(conditions=False)
+        return self._residuals[body.name]
+
+    def sides(self, k: str) -> dict[str, dict]:
+        """Body name -> its side of interface k (:func:`_sides`), on every rank."""
+        if k not in self._sides:
+            gathered = _sides(self.system, [k])
+            self._sides[k] = {name: side[k] for name, side in gathered.items() if k in side}
+        return self._sides[k]
 
 
 def _once(system: System, value):
@@ -288,10 +324,11 @@ def _held(
     return None
 
 
-def _flow(system: System, group: str, field: str, component: int | None) -> float:
+def _flow(reading: _Reading, group: str, field: str, component: int | None) -> float:
     """What enters the bodies through a boundary group, or crosses an interface."""
+    system = reading.system
     if group in system.layers:
-        return _across(system, group, field, component)
+        return _across(reading, group, field, component)
     scene = system.problem.scene
     if not any(group in b.boundaries for b in scene.bodies.values()):
         raise ValueError(
@@ -306,21 +343,21 @@ def _flow(system: System, group: str, field: str, component: int | None) -> floa
         local = 0.0
         held = _held(body, group, field, component)
         if held is not None:  # (collective: the same on every rank of the body)
-            local += body.residual(conditions=False)[held].sum()
+            local += reading.residual(body)[held].sum()
         if group in body.forms.loads:
             local -= _assembled(body.forms.loads[group])[dofs].sum()
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM)
 
 
-def _across(system: System, k: str, field: str, component: int | None) -> float:
-    layer = system.layers[k]
+def _across(reading: _Reading, k: str, field: str, component: int | None) -> float:
+    layer = reading.system.layers[k]
     if (field, component) not in layer.channels and (field, None) not in layer.channels:
         return 0.0
     c = layer.channels.index((field, component if field == "displacement" else None))
     part = slice(c * layer.nodes, (c + 1) * layer.nodes)
-    sides = _sides(system, [k])
-    first, second = (sides[name][k]["outflow"][part] for name in layer.interface.bodies)
+    sides = reading.sides(k)
+    first, second = (sides[name]["outflow"][part] for name in layer.interface.bodies)
     return float(0.5 * (first.sum() - second.sum()))
 
 
@@ -339,7 +376,7 @@ def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dic
                 continue
             layer = body.layers[k]
             ds = body.forms.ds(body.forms.tags[k])
-            v = _split(body, ufl.TestFunction(body.forms.W))
+            v = split_fields(ufl.TestFunction(body.forms.W), body.forms.fields)
             first = v[body.forms.fields[0]]  # any field: each channel has the same nodes
             first = first if first.ufl_shape == () else first[0]
             side = {
