@@ -77,9 +77,8 @@ def write_vtk(directory: str | Path, system: System) -> list[Path]:
             f.x.scatter_forward()
             functions.append(f)
         path = directory / f"master_{k}.pvd"
-        if layer.V.mesh.comm.size == system.comm.size:
-            _write(path, functions)
-        elif system.comm.rank == 0:  # a layer kept whole on every rank: rank 0 writes it
+        # a layer kept whole on every rank (rank groups): rank 0 writes it
+        if layer.V.mesh.comm.size == system.comm.size or system.comm.rank == 0:
             _write(path, functions)
         system.comm.barrier()
         written.append(path)
