@@ -6,7 +6,8 @@ and ``physics`` (materials, contact laws, conditions, UFL residuals per body) �
 contact DOFs left as a Schur block: ``schur``) → ``system`` (every body and master, the
 state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteration: fixed point
 or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) →
-``transient`` (backward Euler and BDF2 steps) → ``readback`` (integrals by group, contact fields,
+``transient`` (backward Euler and BDF2 steps, fixed or adaptive) → ``history`` (probes per
+step, VTK series, checkpoints and restart) → ``readback`` (integrals by group, contact fields,
 balances) and ``io`` (VTK).
 Import ``dolfinx_solver`` before this package (this module does it).
 """
@@ -15,6 +16,7 @@ import dolfinx_solver  # noqa: F401  (must precede dolfinx and petsc4py)
 
 from subdomain_contact import laws
 from subdomain_contact.correctors import Exact, Method1, Method2, PartialCondensation, paper_factor
+from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
 from subdomain_contact.monolithic import CG_GAMG, Monolithic
@@ -41,6 +43,7 @@ from subdomain_contact.readback import (
     force,
     heat,
     summary,
+    value_at,
     voltage_drop,
 )
 from subdomain_contact.scene import Scene, load_scene
@@ -52,7 +55,7 @@ from subdomain_contact.subdomain import (
     Tolerance,
 )
 from subdomain_contact.system import System
-from subdomain_contact.transient import Stepper
+from subdomain_contact.transient import StepFailedError, Stepper
 
 __all__ = [
     "CG_GAMG",
@@ -64,6 +67,7 @@ __all__ = [
     "Exact",
     "ExponentialClosure",
     "HeatFlux",
+    "History",
     "InterfaceResult",
     "Material",
     "Method1",
@@ -79,6 +83,7 @@ __all__ = [
     "Result",
     "Scene",
     "Schedule",
+    "StepFailedError",
     "Stepper",
     "SubdomainConvergenceError",
     "Subdomains",
@@ -98,6 +103,7 @@ __all__ = [
     "plot_vtk",
     "solve",
     "summary",
+    "value_at",
     "voltage_drop",
     "write_vtk",
 ]

@@ -16,7 +16,7 @@ from mpi4py import MPI
 from subdomain_contact.readback import CONTACT_UNITS, contact_fields
 from subdomain_contact.system import System
 
-__all__ = ["UNITS", "plot_vtk", "write_vtk"]
+__all__ = ["UNITS", "plot_vtk", "write_series", "write_vtk"]
 
 #: Output name of each field, with its unit.
 UNITS = {
@@ -26,7 +26,7 @@ UNITS = {
 }
 
 
-def write_vtk(directory: str | Path, system: System) -> list[Path]:
+def write_vtk(directory: str | Path, system: System, time: float = 0.0) -> list[Path]:
     """Write the system's current state for ParaView (collective).
 
     Files: ``<body>.pvd`` (its scalar fields), ``<body>_displacement.pvd`` (the displacement,
@@ -37,6 +37,7 @@ def write_vtk(directory: str | Path, system: System) -> list[Path]:
     Args:
         directory: Output folder (created).
         system: A system at its current state (a solution, for the contact fields).
+        time: The time [s] the files carry.
 
     Returns:
         The ``.pvd`` files written, ``scene.pvd`` last.
@@ -50,11 +51,11 @@ def write_vtk(directory: str | Path, system: System) -> list[Path]:
             f = dolfinx.fem.Function(V, name=UNITS[field])
             f.x.array[:] = body.U.x.array[parent_of]
             if field == "displacement":
-                written.append(_write(directory / f"{name}_displacement.pvd", [f]))
+                written.append(_write(directory / f"{name}_displacement.pvd", [f], time))
             else:
                 scalars.append(f)
         if scalars:
-            written.append(_write(directory / f"{name}.pvd", scalars))
+            written.append(_write(directory / f"{name}.pvd", scalars, time))
     # every group's files, known on every rank (a group's root speaks for it)
     mine = written if system.problem.scene.group_comm.rank == 0 else []
     written = [path for part in system.comm.allgather(mine) for path in part]
@@ -79,15 +80,27 @@ def write_vtk(directory: str | Path, system: System) -> list[Path]:
         path = directory / f"master_{k}.pvd"
         # a layer kept whole on every rank (rank groups): rank 0 writes it
         if layer.V.mesh.comm.size == system.comm.size or system.comm.rank == 0:
-            _write(path, functions)
+            _write(path, functions, time)
         system.comm.barrier()
         written.append(path)
     written.append(_scene(directory / "scene.pvd", written, system.comm))
     return written
 
 
-def _scene(path: Path, files: list[Path], comm: MPI.Comm) -> Path:
-    """``scene.pvd``: every dataset of ``files`` at its time, one part per file (rank 0)."""
+def write_series(path: str | Path, scenes: list[Path], comm: MPI.Comm) -> Path:
+    """One ``.pvd`` of a time series: every dataset of each step's ``scene.pvd``, at its time.
+
+    ParaView opens it as one scene whose time steps are the files' times (rank 0 writes).
+    """
+    return _scene(Path(path), [Path(s) for s in scenes], comm, parts=False)
+
+
+def _scene(path: Path, files: list[Path], comm: MPI.Comm, *, parts: bool = True) -> Path:
+    """Every dataset of ``files`` at its time in one ``.pvd`` (rank 0).
+
+    ``parts``: one part per file (the files of one time); otherwise each file's own parts
+    (files of successive times).
+    """
     if comm.rank == 0:
         root = ET.Element("VTKFile", type="Collection", version="0.1")
         collection = ET.SubElement(root, "Collection")
@@ -97,8 +110,8 @@ def _scene(path: Path, files: list[Path], comm: MPI.Comm) -> Path:
                     collection,
                     "DataSet",
                     timestep=dataset.get("timestep", "0"),
-                    part=str(part),
-                    name=pvd.stem,
+                    part=str(part) if parts else dataset.get("part", "0"),
+                    name=dataset.get("name", pvd.stem) if not parts else pvd.stem,
                     file=str((pvd.parent / dataset.get("file")).relative_to(path.parent)),
                 )
         ET.indent(root)
@@ -107,14 +120,14 @@ def _scene(path: Path, files: list[Path], comm: MPI.Comm) -> Path:
     return path
 
 
-def _write(path: Path, functions: list[dolfinx.fem.Function]) -> Path:
-    """The functions (on one mesh) at time 0, collective on the mesh's communicator."""
+def _write(path: Path, functions: list[dolfinx.fem.Function], time: float) -> Path:
+    """The functions (on one mesh) at ``time`` [s], collective on the mesh's communicator."""
     comm = functions[0].function_space.mesh.comm
     if comm.rank == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
     comm.barrier()
     with dolfinx.io.VTKFile(comm, str(path), "w") as vtk:
-        vtk.write_function(functions, 0.0)
+        vtk.write_function(functions, time)
     return path
 
 

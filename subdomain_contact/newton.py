@@ -378,8 +378,11 @@ def _newton(
     result.scale = dict(callbacks.scale)
     for obj in (snes, J, x, f):
         obj.destroy()
-    if isinstance(cause, ValueError):  # bad input, not a failure to converge
-        raise cause
+    if isinstance(cause, ValueError) and result.iterations == 0:
+        raise cause  # at the initial state: bad input, not a failure to converge
+    # later, an iterate far from the solution (e.g. a contact law's exponential overshooting
+    # into a singular interface operator): a failure to converge, which a line search or a
+    # shorter time step may avoid
     if isinstance(cause, SubdomainConvergenceError):
         result.inner.append(cause.result)  # the failed inner solve, with its history
     if reason is None or reason < 0:

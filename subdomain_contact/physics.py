@@ -38,6 +38,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 import ufl
+import ufl.algorithms
 
 from subdomain_contact.laws import Law, check_finite
 from subdomain_contact.scene import Body, Scene
@@ -169,8 +170,10 @@ class Schedule:
     """A value that changes in time: piecewise linear through (time [s], value) points.
 
     Held at its first and last values outside them (a current ramp, a measured history).
-    Give it as the value of a condition (or a convection's ambient); each time step takes
-    its value at the step's end (:class:`~subdomain_contact.transient.Stepper`).
+    A time given twice is a switch: the value jumps there (a step that ends on it takes the
+    value before, the next step the value after). Give it as the value of a condition (or a
+    convection's ambient); each time step takes its value at the step's end
+    (:class:`~subdomain_contact.transient.Stepper`, whose steps land on every time listed).
     """
 
     times: tuple[float, ...]
@@ -182,12 +185,24 @@ class Schedule:
             raise ValueError("Schedule: as many times as values, at least one")
         if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
             raise ValueError("Schedule: times and values must be finite")
-        if np.any(np.diff(times) <= 0):
-            raise ValueError(f"Schedule: times must increase strictly, got {self.times}")
+        steps = np.diff(times)
+        if np.any(steps < 0) or np.any((steps[:-1] == 0) & (steps[1:] == 0)):
+            raise ValueError(
+                f"Schedule: times must increase (a time given twice is a switch, never three "
+                f"times), got {self.times}"
+            )
 
     def at(self, time: float) -> float:
-        """The value at ``time`` [s]."""
-        return float(np.interp(time, self.times, self.values))
+        """The value at ``time`` [s] (at a switch, the value before it)."""
+        times, values = np.asarray(self.times, float), np.asarray(self.values, float)
+        hits = np.flatnonzero(times == time)
+        if hits.size:
+            return float(values[hits[0]])
+        i = int(np.searchsorted(times, time, side="right"))
+        if i == 0 or i == len(times):
+            return float(values[min(i, len(times) - 1)])
+        weight = (time - times[i - 1]) / (times[i] - times[i - 1])
+        return float(values[i - 1] + weight * (values[i] - values[i - 1]))
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Schedule:
@@ -604,7 +619,10 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         link, joule, tie, contact_laws = _half_link(
             problem.contacts[i.name], jump, split_fields(Um, fields), v, n, constant, stiffness
         )
-        dS = ds(i.tag)
+        # one quadrature for every term of the half-link (its link, flux, Joule heat and tie),
+        # that of the whole: the master equation then sums exactly what the bodies feel
+        whole = link if tie is None else link + tie
+        dS = ds(i.tag, degree=ufl.algorithms.estimate_total_polynomial_degree(whole))
         for name, law in contact_laws.items():
             laws[f"{name} of interface '{i.name}'"] = (law, dS)
         links[i.name] = link * dS

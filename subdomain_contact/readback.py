@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dolfinx
 import dolfinx.fem.petsc
+import dolfinx.geometry
 import numpy as np
 import numpy.typing as npt
 import ufl
@@ -39,6 +40,7 @@ __all__ = [
     "force",
     "heat",
     "summary",
+    "value_at",
     "voltage_drop",
 ]
 
@@ -106,6 +108,34 @@ def average(system: System, group: str, field: str) -> float:
     if totals[1] == 0:
         raise ValueError(f"{scene.source}: no boundary group or interface named '{group}'")
     return float(totals[0] / totals[1])
+
+
+def value_at(
+    system: System, body: str, field: str, point: tuple[float, ...], component: int | None = None
+) -> float:
+    """A field's value [K, V, m] at a point of a body (a displacement: give its component).
+
+    Raises:
+        ValueError: The point is not in the body (naming both).
+    """
+    found = (False, 0.0)
+    if body in system.bodies:
+        b = system.bodies[body]
+        V, parent_of = b.forms.collapsed(field, component)
+        f = dolfinx.fem.Function(V)
+        f.x.array[:] = b.U.x.array[parent_of]
+        mesh = V.mesh
+        x = np.zeros((1, 3))
+        x[0, : len(point)] = point
+        tree = dolfinx.geometry.bb_tree(mesh, mesh.topology.dim)
+        candidates = dolfinx.geometry.compute_collisions_points(tree, x)
+        cells = dolfinx.geometry.compute_colliding_cells(mesh, candidates, x).links(0)
+        if len(cells):
+            found = (True, float(f.eval(x, cells[:1])[0]))
+    for hit, value in system.comm.allgather(found):
+        if hit:
+            return value
+    raise ValueError(f"{system.problem.scene.source}: the point {point} is not in body '{body}'")
 
 
 def voltage_drop(system: System, high: str, low: str) -> float:

@@ -251,6 +251,11 @@ class System:
             for coefficient, schedule in body.forms.timed:
                 coefficient.value = schedule.at(time)
 
+    def breakpoints(self) -> list[float]:
+        """Every time [s] listed by a ``Schedule`` of the problem's conditions (collective)."""
+        local = {t for b in self.bodies.values() for _, s in b.forms.timed for t in s.times}
+        return sorted({t for part in self.comm.allgather(local) for t in part})
+
     def keep_previous(self) -> None:
         """The current state becomes the previous time's, and that one the time before."""
         for body in self.bodies.values():

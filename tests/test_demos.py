@@ -5,6 +5,8 @@ import runpy
 import sys
 from pathlib import Path
 
+import pytest
+
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("demo_*.py"))
 CHECKED = {
     "demo_two_plates",
@@ -13,6 +15,7 @@ CHECKED = {
     "demo_thermal_expansion",
     "demo_error_vs_runtime",
     "demo_extreme_cases",
+    "demo_transient_joule",
 }
 
 
@@ -212,3 +215,45 @@ def test_demo_extreme_cases(shared_tmp, monkeypatch, comm):
     assert rows["h = 0 (insulating)"]["error"] < 1e-12
     assert rows["h = 1e+14 W/(m² K)"]["error"] < 1e-12
     assert (out / "extreme.md").exists()
+
+
+def test_demo_transient_joule(shared_tmp, monkeypatch, comm):
+    """The bars heat, expand and close their contact; every step balances its heat."""
+    import csv
+
+    import pyvista
+
+    out = shared_tmp / "out_transient_joule"
+    run_demo(demo("demo_transient_joule"), out, monkeypatch)
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "history.csv") as file:
+        rows = list(csv.DictReader(file))
+    assert len(rows) == report["steps"] and [int(r["step"]) for r in rows] == list(
+        range(1, len(rows) + 1)
+    )
+    # every step's heat balance to Newton's tolerance, as assert_balanced (measured ≤ 2e-11;
+    # 2.1e-4 when the link and the master equation used different quadratures)
+    assert report["max heat imbalance"] < 1e-8
+    assert_balanced(report["readback"])
+    resistance = [float(r["contact resistance [µΩ m]"]) for r in rows]
+    pressure = [float(r["mean contact pressure [MPa]"]) for r in rows]
+    # open at first: R = 1 / (g(0, T) H) = 1 / (1e3 S/m² × 0.1 m) = 1e4 µΩ m, g at 300 K; the
+    # first step warms the contact by well under 1e-3 K, which moves g(0, T) by < 2.5e-6
+    assert pressure[0] == 0.0
+    assert resistance[0] == pytest.approx(1e4, rel=1e-5)
+    # closed by 2.5 h: the pressure rises and the resistance falls more than tenfold
+    assert pressure[-1] > 0.1 and resistance[-1] < 1e3
+    times = [float(r["time [s]"]) for r in rows]
+    assert 7200.0 in times  # a step ends on the ramp's corner
+    assert times[-1] == report["until"]
+    # the VTK series: every 10th step, the ramp's end and the last step, at their times
+    written = sorted({t for r, t in zip(rows, times, strict=True) if int(r["step"]) % 10 == 0}
+                     | {7200.0, times[-1]})  # fmt: skip
+    if comm.rank == 0:
+        reader = pyvista.get_reader(str(out / "series.pvd"))
+        assert reader.time_values == pytest.approx(written, rel=1e-12)
+        reader.set_active_time_value(written[-1])
+        # each bar, its displacement (a vector, a file of its own) and the master layer
+        assert reader.read().n_blocks == 5
+    assert (out / "history.png").exists() and (out / "end.png").exists()

@@ -1,0 +1,186 @@
+# # Joule heating in time: two bars heated by a current ramp until they reach steady state
+#
+# The electrical preheating of a Hall–Héroult cell in miniature, in time. A carbon-like bar and
+# a steel-like bar, side by side between two walls, carry a current through one contact. The
+# voltage across them is ramped from 0 to 1 V over two hours, then held. The bars heat by
+# Joule effect (in the bulk and at the contact), expand against the walls, and the contact,
+# open by 5 µm at first, closes: its pressure grows, its thermal and electrical conductances
+# grow with it (laws of p and T), and the current rises. Each time step is a Newton solve of
+# the whole coupled problem with the subdomain iteration inside.
+#
+# It shows
+#
+# * BDF2 with adaptive steps (a local error estimate of T, 0.5 K per step by default): short
+#   steps during the ramp, long ones as the bars settle;
+# * the probes against time (`history.csv`, `history.json`, `history.png`): temperatures at
+#   the bars' centres, the current, the voltage drop across the contact and the contact's
+#   electrical resistance, the mean contact pressure, the heat balance of every step;
+# * the end state against the steady solver's answer;
+# * a VTK time series (`series.pvd`: one scene, its time steps), checkpoints, and restart:
+#   stop it with Ctrl-C (or SIGTERM) and run it again with `--restart`.
+#
+# ## The problem
+#
+# $\rho c_p \partial_t T - \nabla\cdot(k\nabla T) = \sigma|\nabla\phi|^2$,
+# $-\nabla\cdot(\sigma\nabla\phi) = 0$, $-\nabla\cdot\boldsymbol\sigma(u, T) = 0$ (plane
+# strain). Bars of 0.5 m × 0.1 m, T = 300 K at both ends, from 300 K everywhere at t = 0;
+# u_x = 0 at both walls, rollers at the bottom. The laws of `verification.cases._squeezed_laws`
+# (k(T), σ(T), h(p, T), g(p, T), an exponential closure law). Storage: amorphous carbon
+# ρ = 1950 kg/m³, c_p = 726 J/(kg K), and plain carbon steel (AISI 1010) ρ = 7832 kg/m³,
+# c_p = 434 J/(kg K), at 300 K (Incropera et al., *Fundamentals of Heat and Mass Transfer*,
+# 6th ed., table A.1). Time constants ρ c_p L²/k ≈ 9.8 h (carbon) and 5.2 h (steel).
+#
+# Run `python demos/demo_transient_joule.py` (`--small`: a coarse mesh and a short run, for
+# the tests; `--quiet`: no progress line; `--restart`: go on from the latest checkpoint).
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+import numpy as np
+from mpi4py import MPI
+
+import subdomain_contact as sc
+from verification.cases import GEO, _squeezed_laws
+
+parser = argparse.ArgumentParser(description=__doc__)
+parser.add_argument("--small", action="store_true", help="a coarse mesh and a short run")
+parser.add_argument("--out", type=Path, default=Path("out_transient_joule"))
+parser.add_argument("--quiet", action="store_true", help="no progress line")
+parser.add_argument("--restart", action="store_true", help="go on from the latest checkpoint")
+parser.add_argument("--tolerance", type=float, default=0.5, help="local error per step [K]")
+args = parser.parse_args()
+comm = MPI.COMM_WORLD
+started = time.perf_counter()
+HOUR = 3600.0
+VOLTAGE = 1.0  # [V] after the ramp
+
+
+def say(*text: object) -> None:
+    if comm.rank == 0 and not args.quiet:
+        print(*text, flush=True)
+
+
+layers, rows = (6, 2) if args.small else (64, 12)
+# the small run stops at 2.5 h, once the contact has closed (the tests check balances and
+# restart on it); the full one goes on for 5 days, 12 times the slower time constant: the
+# steady state
+until = 2.5 * HOUR if args.small else 120 * HOUR
+scene = sc.load_scene(
+    GEO / "two_plates.geo",
+    bodies=["plate_A", "plate_B"],
+    interfaces=["contact"],
+    parameters={"layers": layers, "rows": rows, "length": 0.5, "height": 0.1},
+)
+carbon, steel, contact = _squeezed_laws()
+carbon = dataclasses.replace(carbon, density=1950.0, heat_capacity=726.0)  # Incropera A.1
+steel = dataclasses.replace(steel, density=7832.0, heat_capacity=434.0)  # Incropera A.1
+contact = dataclasses.replace(contact, gap=5e-6)
+ramp = sc.Schedule((0.0, 2 * HOUR), (0.0, VOLTAGE))  # [V]
+
+
+def problem(voltage) -> sc.Problem:
+    return sc.Problem(
+        scene,
+        {"plate_A": carbon, "plate_B": steel},
+        {"contact": contact},
+        [
+            sc.Temperature("left", 300.0),
+            sc.Temperature("right", 300.0),
+            sc.Potential("left", voltage),
+            sc.Potential("right", 0.0),
+            sc.Displacement("left", 0, 0.0),
+            sc.Displacement("right", 0, 0.0),
+            sc.Displacement("bottom", 1, 0.0),
+        ],
+    )
+
+
+def probes(system: sc.System) -> dict[str, float]:
+    """What the history records at every step (one reading of the state)."""
+    report = sc.summary(system)
+    fields = sc.contact_fields(system)["contact"]
+    area = fields["area"]
+    jump = float(np.sum(fields["potential jump"] * area) / area.sum())
+    current = report["contacts"]["contact"]["current"]
+    return {
+        "T centre carbon [K]": sc.value_at(system, "plate_A", "temperature", (0.25, 0.05)),
+        "T centre steel [K]": sc.value_at(system, "plate_B", "temperature", (0.75, 0.05)),
+        "current [A/m]": current,
+        "contact voltage drop [mV]": 1e3 * jump,
+        "contact resistance [µΩ m]": 1e6 * jump / current if current else float("nan"),
+        "mean contact pressure [MPa]": 1e-6 * report["contacts"]["contact"]["mean pressure"],
+        "heat imbalance [relative]": report["balance"]["heat"]["relative"],
+    }
+
+
+system = sc.System(problem(ramp))
+system.reset({"temperature": 300.0})
+stepper = sc.Stepper(system, "bdf2")
+history = sc.History(
+    args.out,
+    stepper,
+    probes,
+    until=until,
+    vtk_every=10,
+    vtk_times=[2 * HOUR] if until > 2 * HOUR else [],
+    checkpoint_every=5,
+    quiet=args.quiet,
+)
+resumed = history.start(restart=args.restart)
+say(f"{system.num_dofs()} DOFs on {comm.size} rank(s); BDF2, local error {args.tolerance} K/step")
+stepper.march(
+    until,
+    60.0,
+    tolerance=args.tolerance,
+    max_step=12 * HOUR,
+    land_on=history.vtk_times,
+    after_step=history.after_step,
+    rtol=1e-10,
+)
+history.finish()
+if history.interrupted:
+    system.destroy()
+    sys.exit(1)
+
+# ## The end state against the steady solver's answer (the full run reaches steady state)
+x = system.state()
+to_steady = None
+if not args.small:
+    steady = sc.System(problem(VOLTAGE))
+    steady.set_state(x)  # the same layout: Newton starts from the end state
+    sc.solve(steady, rtol=1e-10)
+    to_steady = system.difference(x, steady.state())
+    steady.destroy()
+    say(f"end state vs steady solve, per field: {to_steady}")
+end = history.rows[-1]
+say(
+    f"{stepper.steps} steps ({stepper.rejected} taken again) to t = {stepper.time / HOUR:.3g} h; "
+    f"T centre carbon {end['T centre carbon [K]']:.5g} K, current {end['current [A/m]']:.5g} A/m"
+)
+report = {
+    "dofs": system.num_dofs(),
+    "ranks": comm.size,
+    "steps": stepper.steps,
+    "rejected": stepper.rejected,
+    "resumed": resumed,
+    "until": until,
+    "factorisations": int(sum(row["factorisations"] for row in history.rows)),
+    "newton": [row["newton"] for row in history.rows],
+    "max heat imbalance": max(row["heat imbalance [relative]"] for row in history.rows),
+    "end": end,
+    "end_vs_steady": to_steady,
+    "readback": sc.summary(system),
+    "seconds": time.perf_counter() - started,
+}
+if comm.rank == 0:
+    (args.out / "report.json").write_text(json.dumps(report, indent=1))
+    last = sorted((args.out / "vtk").glob("step_*"))[-1]
+    sc.plot_vtk(last / "scene.pvd", args.out / "end.png", title=f"t = {until / HOUR:.3g} h")
+x.destroy()
+system.destroy()
+say(f"wrote {args.out}/ in {time.perf_counter() - started:.1f} s")

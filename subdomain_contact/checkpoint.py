@@ -1,0 +1,163 @@
+"""Checkpoints of a transient run: the state, the previous times' states and the clock.
+
+Written as NumPy ``.npz`` files, one per body and one for the master layers and the stepper,
+in a folder per checkpoint; a checkpoint becomes the latest only once all its files are
+written (the folder is renamed into place), so a run killed while writing keeps the one
+before. Why NumPy rather than adios4dolfinx: ADIOS2 is not in this project's stack, and
+the state is all a restart needs (the mesh comes again from the ``.geo`` file). Each body's
+values are keyed by the mesh's *input* node numbers and by component, and the master values by
+their coordinates, so a run may resume on another number of ranks or another placement.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from subdomain_contact.body import Body
+from subdomain_contact.scene import match_points
+from subdomain_contact.system import System
+
+__all__ = ["latest", "load", "save"]
+
+Vector = npt.NDArray[np.float64]
+
+#: Checkpoints kept (the latest ones): one more than the latest, should a disk fill up.
+KEEP = 2
+
+
+def save(directory: str | Path, system: System, clock: dict, arrays: dict[str, list[dict]]) -> Path:
+    """Write a checkpoint of the system's state (collective); returns its folder.
+
+    Args:
+        directory: The run's checkpoint folder; the checkpoint goes to ``step_<n>`` in it.
+        system: The system.
+        clock: JSON-ready numbers of the stepper (``steps`` names the folder).
+        arrays: Extra per-body arrays shaped like a body's state (the stepper's past states),
+            by name: a list of ``{body: array}``.
+    """
+    directory = Path(directory)
+    final = directory / f"step_{clock['steps']:06d}"
+    partial = directory / f".partial_{clock['steps']:06d}"
+    comm = system.comm
+    if comm.rank == 0:
+        shutil.rmtree(partial, ignore_errors=True)
+        partial.mkdir(parents=True)
+    comm.barrier()
+    for name, body in system.bodies.items():
+        keys = _keys(body)[: body.size]
+        values = {
+            "state": body.U.x.array[: body.size],
+            "previous": body.forms.history[0].x.array[: body.size],
+            "before_previous": body.forms.history[1].x.array[: body.size],
+        }
+        for label, past in arrays.items():
+            for i, states in enumerate(past):
+                values[f"{label}_{i}"] = states[name][: body.size]
+        gathered = body.comm.gather((keys, values), root=0)
+        if body.comm.rank == 0:
+            all_keys = np.concatenate([k for k, _ in gathered])
+            order = np.argsort(all_keys)
+            columns = {
+                label: np.concatenate([v[label] for _, v in gathered])[order] for label in values
+            }
+            np.savez(partial / f"body_{name}.npz", keys=all_keys[order], **columns)
+    if comm.rank == 0:
+        masters = {f"{k}_values": v for k, v in system.masters.items()}
+        points = {f"{k}_points": layer.coordinates for k, layer in system.layers.items()}
+        np.savez(partial / "masters.npz", **masters, **points)
+        (partial / "clock.json").write_text(json.dumps(clock))
+        shutil.rmtree(final, ignore_errors=True)
+        partial.rename(final)
+        (directory / "latest").write_text(final.name)
+        for older in sorted(directory.glob("step_*"))[:-KEEP]:
+            shutil.rmtree(older)
+    comm.barrier()
+    return final
+
+
+def latest(directory: str | Path, comm: MPI.Comm) -> Path | None:
+    """The latest complete checkpoint in ``directory`` (None if there is none)."""
+    pointer = Path(directory) / "latest"
+    name = pointer.read_text().strip() if comm.rank == 0 and pointer.exists() else None
+    name = comm.bcast(name, root=0)
+    return None if name is None else Path(directory) / name
+
+
+def load(folder: str | Path, system: System, labels: dict[str, int]) -> tuple[dict, dict]:
+    """Put a checkpoint's state into the system (collective).
+
+    Args:
+        folder: A checkpoint's folder (:func:`latest`).
+        system: A system of the same scene and problem (any number of ranks, any placement).
+        labels: How many arrays of each extra label to read back.
+
+    Returns:
+        The clock, and the extra arrays as ``{label: [{body: array}]}`` (each body's local
+        entries, ghosts included).
+
+    Raises:
+        ValueError: A checkpoint of another scene (its nodes or fields are not this one's).
+    """
+    folder = Path(folder)
+    clock = json.loads((folder / "clock.json").read_text())
+    extra: dict[str, list[dict]] = {label: [{} for _ in range(n)] for label, n in labels.items()}
+    failure = None
+    for name, body in system.bodies.items():
+        with np.load(folder / f"body_{name}.npz") as data:
+            stored = data["keys"]
+            keys = _keys(body)
+            where = np.searchsorted(stored, keys)
+            where[where == len(stored)] = 0
+            if len(stored) == 0 or np.any(stored[where] != keys):
+                failure = f"{folder}: body '{name}' has nodes or fields this checkpoint lacks"
+                break
+            body.U.x.array[:] = data["state"][where]
+            body.forms.history[0].x.array[:] = data["previous"][where]
+            body.forms.history[1].x.array[:] = data["before_previous"][where]
+            for label, past in extra.items():
+                for i, states in enumerate(past):
+                    states[name] = data[f"{label}_{i}"][where]
+    messages = [m for m in system.comm.allgather(failure) if m]
+    if messages:
+        raise ValueError(f"{messages[0]}: restart from a checkpoint of the same scene")
+    with np.load(folder / "masters.npz") as data:
+        masters = {}
+        for k, layer in system.layers.items():
+            what = f"{folder}: interface '{k}'"
+            index = match_points(data[f"{k}_points"], layer.coordinates, what=what)
+            values = data[f"{k}_values"].reshape(-1, len(index))
+            masters[k] = values[:, index].ravel()
+    system.masters = masters
+    for body in system.bodies.values():
+        body.set_masters(masters)
+    return clock, extra
+
+
+def _keys(body: Body) -> npt.NDArray[np.int64]:
+    """A partition-independent key of every local entry of the body's state (ghosts too).
+
+    ``input node number × components + component``, components over the body's fields in
+    order (a displacement has one per axis); degree-1 Lagrange spaces put one DOF of each
+    component on each node of a degree-1 mesh, in the order of the cell's geometry nodes.
+    """
+    forms, mesh = body.forms, body.forms.W.mesh
+    nodes = mesh.geometry.input_global_indices.astype(np.int64)
+    geometry = mesh.geometry.dofmaps[0]
+    channels = [
+        (field, component)
+        for field in forms.fields
+        for component in ((None,) if field != "displacement" else range(mesh.geometry.dim))
+    ]
+    keys = np.full(len(body.U.x.array), -1, dtype=np.int64)
+    for c, (field, component) in enumerate(channels):
+        V, parent_of = forms.collapsed(field, component)
+        node_of = np.empty(len(parent_of), dtype=np.int64)
+        node_of[V.dofmap.list.ravel()] = nodes[geometry.ravel()]
+        keys[parent_of] = node_of * len(channels) + c
+    return keys
