@@ -24,17 +24,16 @@
 # $\rho c_p \partial_t T - \nabla\cdot(k\nabla T) = \sigma|\nabla\phi|^2$,
 # $-\nabla\cdot(\sigma\nabla\phi) = 0$, $-\nabla\cdot\boldsymbol\sigma(u, T) = 0$ (plane
 # strain). Bars of 0.5 m × 0.1 m, T = 300 K at both ends, from 300 K everywhere at t = 0;
-# u_x = 0 at both walls, rollers at the bottom. The laws of `verification.cases._squeezed_laws`
-# (k(T), σ(T), h(p, T), g(p, T), an exponential closure law). Storage: amorphous carbon
-# ρ = 1950 kg/m³, c_p = 726 J/(kg K), and plain carbon steel (AISI 1010) ρ = 7832 kg/m³,
-# c_p = 434 J/(kg K), at 300 K (Incropera et al., *Fundamentals of Heat and Mass Transfer*,
-# 6th ed., table A.1). Time constants ρ c_p L²/k ≈ 9.8 h (carbon) and 5.2 h (steel).
+# u_x = 0 at both walls, rollers at the bottom (`verification.cases.warming_joule_bars`): the
+# laws k(T), σ(T), h(p, T), g(p, T) and an exponential closure law; storage of amorphous
+# carbon ρ = 1950 kg/m³, c_p = 726 J/(kg K), and plain carbon steel (AISI 1010) ρ = 7832
+# kg/m³, c_p = 434 J/(kg K), at 300 K (Incropera et al., *Fundamentals of Heat and Mass
+# Transfer*, 6th ed., table A.1). Time constants ρ c_p L²/k ≈ 9.8 h (carbon) and 5.2 h (steel).
 #
 # Run `python demos/demo_transient_joule.py` (`--small`: a coarse mesh and a short run, for
 # the tests; `--quiet`: no progress line; `--restart`: go on from the latest checkpoint).
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
@@ -45,7 +44,7 @@ import numpy as np
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from verification.cases import GEO, _squeezed_laws
+from verification.cases import GEO, warming_joule_bars
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a coarse mesh and a short run")
@@ -76,28 +75,7 @@ scene = sc.load_scene(
     interfaces=["contact"],
     parameters={"layers": layers, "rows": rows, "length": 0.5, "height": 0.1},
 )
-carbon, steel, contact = _squeezed_laws()
-carbon = dataclasses.replace(carbon, density=1950.0, heat_capacity=726.0)  # Incropera A.1
-steel = dataclasses.replace(steel, density=7832.0, heat_capacity=434.0)  # Incropera A.1
-contact = dataclasses.replace(contact, gap=5e-6)
 ramp = sc.Schedule((0.0, 2 * HOUR), (0.0, VOLTAGE))  # [V]
-
-
-def problem(voltage) -> sc.Problem:
-    return sc.Problem(
-        scene,
-        {"plate_A": carbon, "plate_B": steel},
-        {"contact": contact},
-        [
-            sc.Temperature("left", 300.0),
-            sc.Temperature("right", 300.0),
-            sc.Potential("left", voltage),
-            sc.Potential("right", 0.0),
-            sc.Displacement("left", 0, 0.0),
-            sc.Displacement("right", 0, 0.0),
-            sc.Displacement("bottom", 1, 0.0),
-        ],
-    )
 
 
 def probes(system: sc.System) -> dict[str, float]:
@@ -118,7 +96,7 @@ def probes(system: sc.System) -> dict[str, float]:
     }
 
 
-system = sc.System(problem(ramp))
+system = sc.System(warming_joule_bars(scene, ramp))
 system.reset({"temperature": 300.0})
 stepper = sc.Stepper(system, "bdf2")
 history = sc.History(
@@ -151,7 +129,7 @@ if history.interrupted:
 x = system.state()
 to_steady = None
 if not args.small:
-    steady = sc.System(problem(VOLTAGE))
+    steady = sc.System(warming_joule_bars(scene, VOLTAGE, storage=False))
     steady.set_state(x)  # the same layout: Newton starts from the end state
     sc.solve(steady, rtol=1e-10)
     to_steady = system.difference(x, steady.state())

@@ -2,8 +2,9 @@
 
 A :class:`History` watches a :class:`~subdomain_contact.transient.Stepper` (give its
 :meth:`History.after_step` to :meth:`~subdomain_contact.transient.Stepper.march`). After every
-step it appends a row to ``history.csv`` and ``history.json`` (time, step, Newton iterations,
-inner rounds, factorisations, wall time, and each probe's value) and prints a progress line;
+step it appends a row to ``history.csv`` and ``history.json`` (step, time, its length, steps
+taken again so far, Newton iterations, inner rounds, factorisations, wall time, and each
+probe's value) and prints a progress line;
 every ``vtk_every`` steps and at ``vtk_times`` it writes the scene for ParaView to
 ``vtk/step_<n>/`` and rewrites ``series.pvd``, which holds every written time; every
 ``checkpoint_every`` steps, and when the process receives SIGINT or SIGTERM, it writes a
@@ -38,7 +39,16 @@ __all__ = ["History"]
 Probes = Callable[..., Mapping[str, float]]
 
 #: Columns of every row before the probes.
-COLUMNS = ("step", "time [s]", "step [s]", "newton", "rounds", "factorisations", "wall [s]")
+COLUMNS = (
+    "step",
+    "time [s]",
+    "step [s]",
+    "rejected",
+    "newton",
+    "rounds",
+    "factorisations",
+    "wall [s]",
+)
 
 
 class History:
@@ -158,6 +168,7 @@ class History:
             "step": stepper.steps,
             "time [s]": stepper.time,
             "step [s]": stepper._last,
+            "rejected": stepper.rejected,
             "newton": result.iterations,
             "rounds": result.rounds,
             "factorisations": result.factorisations,
@@ -254,7 +265,7 @@ class History:
         eta = (self.until - row["time [s]"]) / rate if rate > 0 else float("nan")
         self._say(
             f"t = {row['time [s]']:.4g} s ({100 * done:5.1f} %)  step {row['step']}  "
-            f"Δt {row['step [s]']:.3g} s  Newton {row['newton']}  rounds {row['rounds']}  "
+            f"Δt {row['step [s]']:.3g} s ({row['rejected']} taken again)  Newton {row['newton']}  rounds {row['rounds']}  "
             f"wall {row['wall [s]']:.1f} s  ETA {eta:.0f} s"
         )
 

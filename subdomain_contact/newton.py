@@ -316,7 +316,7 @@ def solve(
             ) from last.__cause__
     finally:
         initial.destroy()
-    system.check_laws("at the solution Newton found")
+    system.check_laws("at the solution Newton found", at_solution=True)
     result.line_search = attempt
     result.seconds = time.perf_counter() - start
     result.factorisations = _factorisations(system) - made

@@ -25,9 +25,21 @@ from subdomain_contact.body import Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
 
-__all__ = ["System"]
+__all__ = ["LawRangeError", "System"]
 
 Vector = npt.NDArray[np.float64]
+
+
+class LawRangeError(ValueError):
+    """A law is negative or NaN at a state.
+
+    ``at_solution``: at a state Newton converged to (a spurious root, which a shorter time
+    step may avoid), else at a given state.
+    """
+
+    def __init__(self, message: str, at_solution: bool) -> None:
+        super().__init__(message)
+        self.at_solution = at_solution
 
 
 class System:
@@ -337,23 +349,25 @@ class System:
             {k: np.where(self.active[k], r, self.masters[k]) for k, r in masters.items()}
         )
 
-    def check_laws(self, when: str) -> None:
+    def check_laws(self, when: str, *, at_solution: bool = False) -> None:
         """Refuse a state where a law is negative or NaN (collective), naming it and a point.
 
         Args:
             when: Which state, for the message (e.g. "at the initial state").
+            at_solution: The state is one Newton converged to.
 
         Raises:
-            ValueError: On every rank.
+            LawRangeError: On every rank.
         """
         failing = self._everywhere({n: b.failing_law() for n, b in self.bodies.items()})
         found = [message for message in failing.values() if message is not None]
         if found:
-            raise ValueError(
+            raise LawRangeError(
                 f"{self.problem.scene.source}: {when}, {found[0]}: a conductivity or "
                 "conductance must be >= 0 over the range of temperature and pressure the "
                 "solution visits; check the law there, or start from a state inside its range "
-                "(e.g. system.reset({'temperature': 300.0}))"
+                "(e.g. system.reset({'temperature': 300.0}))",
+                at_solution,
             )
 
     def assemble_jacobian(self) -> None:

@@ -18,7 +18,8 @@ block is rebuilt.
 local error of the step is estimated from the scheme's error constant and the divided
 differences of the latest states, and the next step is chosen to meet it; a step whose
 estimate exceeds the tolerance is rejected and taken again shorter. A step whose Newton fails
-is taken again with half the length, down to ``min_step``. Steps land on the breakpoints of
+(or converges to a spurious root where a law leaves its range) is taken again with half the
+length, down to ``min_step``. Steps land on the breakpoints of
 every ``Schedule`` (a ramp's corners, a switch) and on the times asked for.
 """
 
@@ -34,7 +35,7 @@ from mpi4py import MPI
 
 from subdomain_contact.newton import NewtonConvergenceError, Result, solve
 from subdomain_contact.subdomain import SubdomainConvergenceError
-from subdomain_contact.system import System
+from subdomain_contact.system import LawRangeError, System
 
 __all__ = ["SCHEMES", "StepFailedError", "Stepper"]
 
@@ -89,8 +90,9 @@ class Stepper:
     def advance(self, step: float, linear=None, **options) -> Result:
         """One step of ``step`` [s]; Newton starts from the current state.
 
-        If Newton fails, the system, its history and the clock are put back as they were
-        before the step, and the error propagates.
+        If Newton fails, or converges to a state where a law is out of its range, the system,
+        its history and the clock are put back as they were before the step, and the error
+        propagates.
 
         Args:
             step: Δt [s], > 0.
@@ -103,15 +105,16 @@ class Stepper:
         if not 0.0 < step < float("inf"):
             raise ValueError(f"advance: step = {step!r} s: must be a finite number > 0")
         self._keep_for_undo()
+        before = self._states()
         self.system.set_rates(self.rates(step))
         self.system.set_time(self.time + step)  # the conditions at the step's end
         self.system.keep_previous()
         try:
             result = solve(self.system, linear, **options)
-        except (NewtonConvergenceError, SubdomainConvergenceError):
+        except (NewtonConvergenceError, SubdomainConvergenceError, LawRangeError):
             self.undo()
             raise
-        self.past = [(self.time, self._states()), *self.past[: self.order]]
+        self.past = [(self.time, before), *self.past[: self.order]]
         self.time, self.steps, self._last = self.time + step, self.steps + 1, step
         return result
 
@@ -230,7 +233,9 @@ class Stepper:
                 trial = target - self.time
             try:
                 result = self.advance(trial, linear, **options)
-            except (NewtonConvergenceError, SubdomainConvergenceError) as failure:
+            except (NewtonConvergenceError, SubdomainConvergenceError, LawRangeError) as failure:
+                if isinstance(failure, LawRangeError) and not failure.at_solution:
+                    raise  # the step's initial state: bad data, not a step too long
                 self.rejected += 1
                 if trial / 2 < min_step:
                     raise StepFailedError(

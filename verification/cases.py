@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,7 @@ from subdomain_contact.physics import (
     Penalty,
     Potential,
     Problem,
+    Schedule,
     Temperature,
 )
 from subdomain_contact.scene import Scene, load_scene
@@ -42,6 +43,7 @@ __all__ = [
     "steel_blocks_between_walls",
     "two_plates",
     "two_plates_scene",
+    "warming_joule_bars",
 ]
 
 #: The repository's geometry folder.
@@ -316,6 +318,37 @@ def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
             Potential("right", 0.0),
             Displacement("left", 0, 0.0),
             Displacement("right", 0, -2e-5),
+            Displacement("bottom", 1, 0.0),
+        ],
+    )
+
+
+def warming_joule_bars(
+    scene: Scene, voltage: float | Schedule = 1.0, *, gap: float = 5e-6, storage: bool = True
+) -> Problem:
+    """The squeezed Joule bars in time: ``voltage`` [V] across, an initial ``gap`` [m].
+
+    The laws of :func:`_squeezed_laws`; both ends at 300 K; walls at fixed x, rollers at the
+    bottom; the contact open by ``gap`` until the bars expand. With ``storage``, amorphous
+    carbon ρ = 1950 kg/m³, c_p = 726 J/(kg K) and plain carbon steel (AISI 1010) ρ = 7832
+    kg/m³, c_p = 434 J/(kg K), at 300 K (Incropera et al., *Fundamentals of Heat and Mass
+    Transfer*, 6th ed., table A.1).
+    """
+    carbon, steel, contact = _squeezed_laws()
+    if storage:
+        carbon = replace(carbon, density=1950.0, heat_capacity=726.0)
+        steel = replace(steel, density=7832.0, heat_capacity=434.0)
+    return Problem(
+        scene,
+        {"plate_A": carbon, "plate_B": steel},
+        {"contact": replace(contact, gap=gap)},
+        [
+            Temperature("left", 300.0),
+            Temperature("right", 300.0),
+            Potential("left", voltage),
+            Potential("right", 0.0),
+            Displacement("left", 0, 0.0),
+            Displacement("right", 0, 0.0),
             Displacement("bottom", 1, 0.0),
         ],
     )
