@@ -265,7 +265,8 @@ class History:
         eta = (self.until - row["time [s]"]) / rate if rate > 0 else float("nan")
         self._say(
             f"t = {row['time [s]']:.4g} s ({100 * done:5.1f} %)  step {row['step']}  "
-            f"Δt {row['step [s]']:.3g} s ({row['rejected']} taken again)  Newton {row['newton']}  rounds {row['rounds']}  "
+            f"Δt {row['step [s]']:.3g} s ({row['rejected']} taken again)  "
+            f"Newton {row['newton']}  rounds {row['rounds']}  "
             f"wall {row['wall [s]']:.1f} s  ETA {eta:.0f} s"
         )
 

@@ -59,6 +59,8 @@ class Monolithic:
         self.refine = refine
         self.K: PETSc.Mat | None = None
         self.ksp: PETSc.KSP | None = None
+        #: Set-ups of the merged matrix's solve: factorisations, for a direct one.
+        self.factorisations = 0
 
     def check(self, system: System) -> None:
         """Refuse a system this solver cannot solve (bodies on different rank groups)."""
@@ -96,10 +98,12 @@ class Monolithic:
             merged.destroy()
             self.ksp.setOperators(self.K)
             self.ksp.setUp()
+            self.factorisations += 1
             return
         self.destroy()
         self.K = merged
         self.ksp = make_ksp(self.K, self.prefix, self.options)
+        self.factorisations += 1
         if self.monitor is not None:
 
             def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:

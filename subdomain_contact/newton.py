@@ -73,7 +73,8 @@ class Result:
         reason: SNES's reason.
         seconds: Wall time [s], set-up included.
         scale: Each field's residual scale [W, A, N] that the convergence test used.
-        factorisations: Sparse factorisations the bodies made in this solve.
+        factorisations: Sparse factorisations made in this solve: the bodies' (subdomain
+            iteration) or the merged matrix's (monolithic).
         jacobians: Jacobians assembled (and handed to the linear solver's ``setup``).
         line_search: The line search that converged.
     """
@@ -295,7 +296,7 @@ def solve(
     linear = linear or Subdomains()
     linear.check(system)
     system.check_laws("at the initial state")
-    made = _factorisations(system)
+    made = _factorisations(system, linear)
     initial = system.state()
     failures = []
     try:
@@ -319,14 +320,14 @@ def solve(
     system.check_laws("at the solution Newton found", at_solution=True)
     result.line_search = attempt
     result.seconds = time.perf_counter() - start
-    result.factorisations = _factorisations(system) - made
+    result.factorisations = _factorisations(system, linear) - made
     return result
 
 
-def _factorisations(system: System) -> int:
-    """Sparse factorisations made so far, each body counted once (collective)."""
+def _factorisations(system: System, linear) -> int:
+    """Sparse factorisations made so far: each body's once, and the linear solver's own."""
     local = sum(b.factorisations for b in system.bodies.values() if b.comm.rank == 0)
-    return int(system.comm.allreduce(local))
+    return int(system.comm.allreduce(local)) + getattr(linear, "factorisations", 0)
 
 
 def _newton(

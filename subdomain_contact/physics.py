@@ -29,6 +29,7 @@ that a sweep over them compiles each form once.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,7 +82,8 @@ class Material:
         expansion: Linear thermal expansion α [1/K].
         reference_temperature: Temperature [K] of zero thermal strain; required with
             ``expansion``.
-        heat_source: Volumetric heat source [W/m^3] (besides Joule heat).
+        heat_source: Volumetric heat source [W/m^3] (besides Joule heat): a number, or a
+            function ``(x, t)`` of the spatial coordinate and the time that returns UFL.
         density: ρ [kg/m^3], with ``heat_capacity``: the body stores heat in a transient
             (:mod:`subdomain_contact.transient`); without them it has no thermal inertia.
         heat_capacity: c_p(T) [J/(kg K)]: a number or a law ``(p, T)``.
@@ -93,7 +95,7 @@ class Material:
     poisson: float = 0.3
     expansion: float = 0.0
     reference_temperature: float | None = None
-    heat_source: float = 0.0
+    heat_source: float | SpaceTime = 0.0
     density: float | None = None
     heat_capacity: float | Law | None = None
 
@@ -229,11 +231,29 @@ class Schedule:
         return cls(times, values)
 
 
+#: Data that vary in space and time: a function ``(x, t)`` of the spatial coordinate
+#: (``ufl.SpatialCoordinate``) and the time (a form coefficient [s]) that returns UFL, e.g.
+#: ``lambda x, t: 300 + 1e-3 * t * x[0]`` (a manufactured solution's data).
+SpaceTime = Callable[[Expr, Expr], Expr]
+
+
+def is_space_time(value: object) -> bool:
+    """Whether ``value`` is data of ``(x, t)``: a callable of two positional parameters."""
+    if not callable(value) or isinstance(value, Schedule):
+        return False
+    try:
+        parameters = inspect.signature(value).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    positional = [p for p in parameters if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    return len(positional) == 2
+
+
 #: Dirichlet data: a number, or a function of the points ``x`` that returns the values: of
 #: numpy arrays (``x`` of shape ``(3, n)`` [m], dolfinx's interpolation convention) or of UFL
 #: (``x`` the spatial coordinate, e.g. ``lambda x: 300 + 20 * ufl.sin(ufl.pi * x[1])``).
-#: Or a :class:`Schedule` of time.
-Data = float | Schedule | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+#: Or a :class:`Schedule` of time, or a function ``(x, t)`` (:data:`SpaceTime`).
+Data = float | Schedule | Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]] | SpaceTime
 
 
 @dataclass(frozen=True)
@@ -352,8 +372,9 @@ class Problem:
             value = getattr(m, attr)
             if value is not None and not callable(value):
                 check_finite(value, f"body '{name}': {attr}", positive=True)
-        for attr in ("expansion", "heat_source"):
-            check_finite(getattr(m, attr), f"body '{name}': {attr}")
+        check_finite(m.expansion, f"body '{name}': expansion")
+        if not is_space_time(m.heat_source):
+            check_finite(m.heat_source, f"body '{name}': heat_source")
         if m.reference_temperature is not None:
             check_finite(m.reference_temperature, f"body '{name}': reference_temperature")
         elif m.expansion != 0 and m.young is not None:
@@ -421,12 +442,16 @@ class Problem:
                 value = getattr(bc, attr, None)
                 if value is not None and not callable(value) and not isinstance(value, Schedule):
                     check_finite(getattr(bc, attr), f"boundary '{bc.boundary}': {attr}")
-            if callable(getattr(bc, "value", None)) and not isinstance(
-                bc, Temperature | Potential | Displacement
+            value = getattr(bc, "value", None)
+            if (
+                callable(value)
+                and not is_space_time(value)
+                and not isinstance(bc, Temperature | Potential | Displacement)
             ):
                 raise ValueError(
-                    f"boundary '{bc.boundary}': {type(bc).__name__} takes a number; "
-                    "functions of x are for Temperature, Potential and Displacement"
+                    f"boundary '{bc.boundary}': {type(bc).__name__} takes a number, a Schedule "
+                    "or a function (x, t); functions of x alone are for Temperature, "
+                    "Potential and Displacement"
                 )
             if isinstance(bc, Convection) and bc.coefficient < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
@@ -499,6 +524,9 @@ class BodyForms:
         storage: The stored heat's residual term ρ c_p(T) ∂T/∂t v_T (in ``bulk``), or None
             for a body without thermal inertia.
         timed: The coefficients that follow a :class:`Schedule` of time, with it.
+        time: The time [s] the data of ``(x, t)`` are at (None: the body has none).
+        moving: Dirichlet data of ``(x, t)``: the Function of each and the expression it is
+            interpolated from again at every time.
         laws: The conductivities and conductances (W/(m K), S/m, W/(m² K), S/m²) as UFL of
             the state, by name, each with the measure where it holds; they must stay ≥ 0.
     """
@@ -524,6 +552,8 @@ class BodyForms:
     rates: tuple[dolfinx.fem.Constant, dolfinx.fem.Constant]
     storage: ufl.Form | None
     timed: list[tuple[dolfinx.fem.Constant, Schedule]]
+    time: dolfinx.fem.Constant | None
+    moving: list[tuple[dolfinx.fem.Function, dolfinx.fem.Expression]]
     _collapsed: dict = field(default_factory=dict, repr=False)
 
     def subspace(self, name: str, component: int | None = None) -> dolfinx.fem.FunctionSpace:
@@ -588,14 +618,24 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     masters = {i.name: dolfinx.fem.Function(W, name=f"master {i.name}") for i in interfaces}
     u, v = split_fields(U, fields), split_fields(ufl.TestFunction(W), fields)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=body.facet_tags)
+    clock: list[dolfinx.fem.Constant] = []  # the time, made on first use
+
+    def time() -> dolfinx.fem.Constant:
+        if not clock:
+            clock.append(constant(0.0))
+        return clock[0]
+
+    x = ufl.SpatialCoordinate(mesh)
     bulk, sources, material_laws = _bulk(
-        problem.materials[body.name], u, v, mesh.geometry.dim, constant
+        problem.materials[body.name], u, v, mesh.geometry.dim, constant, x, time
     )
     laws = {f"{name} of body '{body.name}'": (law, ufl.dx) for name, law in material_laws.items()}
     timed: list[tuple[dolfinx.fem.Constant, Schedule]] = []
 
-    def data(value: float | Schedule) -> dolfinx.fem.Constant:
+    def data(value: float | Schedule | SpaceTime) -> Expr:
         """A form coefficient; a schedule's follows the time (starting at t = 0)."""
+        if is_space_time(value):
+            return value(x, time())
         if not isinstance(value, Schedule):
             return constant(value)
         timed.append((constant(value.at(0.0)), value))
@@ -630,16 +670,23 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         ties[i.name] = None if tie is None else tie * dS
         flux = link if joule is None else link - joule
         fluxes[i.name] = (flux if tie is None else flux + tie) * dS
-    bcs, held = _dirichlet(problem, body, W, fields, data)
+    bcs, held, moving = _dirichlet(problem, body, W, fields, data, time)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
         body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
         ds, tags, sources, loads, held, laws, history, rates, storage, timed,
+        clock[0] if clock else None, moving,
     )  # fmt: skip
 
 
 def _bulk(
-    m: Material, u: dict, v: dict, dim: int, constant: Callable[[float], Expr]
+    m: Material,
+    u: dict,
+    v: dict,
+    dim: int,
+    constant: Callable[[float], Expr],
+    x: Expr,
+    time: Callable[[], Expr],
 ) -> tuple[ufl.Form, ufl.Form | None, dict[str, Expr]]:
     """Conduction and thermoelasticity in the volume [W, A, N], and the heat sources apart.
 
@@ -655,7 +702,9 @@ def _bulk(
     if "temperature" in u:
         k = laws["conductivity"] = _law(m.conductivity, constant)(zero, T)
         terms.append(k * ufl.inner(ufl.grad(T), ufl.grad(v["temperature"])))
-        if m.heat_source != 0:
+        if is_space_time(m.heat_source):
+            sources.append(-m.heat_source(x, time()) * v["temperature"])
+        elif m.heat_source != 0:
             sources.append(-constant(m.heat_source) * v["temperature"])
     if "potential" in u:
         sigma = laws["electrical_conductivity"] = _law(m.electrical_conductivity, constant)(zero, T)
@@ -779,9 +828,14 @@ def _dirichlet(
     W: dolfinx.fem.FunctionSpace,
     fields: tuple[str, ...],
     constant: Callable[[float | Schedule], Expr],
-) -> tuple[list[dolfinx.fem.DirichletBC], list[Condition]]:
-    """The body's Dirichlet conditions, and the condition each one comes from."""
-    bcs, held = [], []
+    time: Callable[[], dolfinx.fem.Constant],
+) -> tuple[list[dolfinx.fem.DirichletBC], list[Condition], list]:
+    """The body's Dirichlet conditions, the condition of each, and the moving data.
+
+    Moving data: those of ``(x, t)``, with the expressions they are interpolated from again
+    at every time.
+    """
+    bcs, held, moving = [], [], []
     fdim = body.mesh.topology.dim - 1
     for bc in problem.conditions:
         if bc.boundary not in body.boundaries or not isinstance(
@@ -803,7 +857,16 @@ def _dirichlet(
             held.append(bc)
             continue
         Vc = V if V is W else V.collapse()[0]
-        data = _interpolated(bc.value, Vc, f"{problem.scene.source}: boundary '{bc.boundary}'")
+        if is_space_time(bc.value):
+            x = ufl.SpatialCoordinate(Vc.mesh)
+            points = Vc.element.interpolation_points
+            expression = dolfinx.fem.Expression(bc.value(x, time()), points)
+            data = dolfinx.fem.Function(Vc)
+            data.interpolate(expression)
+            moving.append((data, expression))
+        else:
+            what = f"{problem.scene.source}: boundary '{bc.boundary}'"
+            data = _interpolated(bc.value, Vc, what)
         if V is W:
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             where, values = dofs, data.x.array[dofs]
@@ -823,7 +886,7 @@ def _dirichlet(
                 f"{problem.scene.source}: boundary '{bc.boundary}' of body '{body.name}': "
                 f"{type(bc).__name__} data = {found[0][0]} at x = {found[0][1]}: must be finite"
             )
-    return bcs, held
+    return bcs, held, moving
 
 
 def _interpolated(value: Callable, V: dolfinx.fem.FunctionSpace, what: str) -> dolfinx.fem.Function:

@@ -258,10 +258,14 @@ class System:
                 body.bulk_changed()
 
     def set_time(self, time: float) -> None:
-        """Conditions that follow a ``Schedule`` take their values at ``time`` [s]."""
+        """Data that follow a ``Schedule`` or a function ``(x, t)`` take their value at ``time``."""
         for body in self.bodies.values():
+            if body.forms.time is not None:
+                body.forms.time.value = time
             for coefficient, schedule in body.forms.timed:
                 coefficient.value = schedule.at(time)
+            for data, expression in body.forms.moving:
+                data.interpolate(expression)
 
     def breakpoints(self) -> list[float]:
         """Every time [s] listed by a ``Schedule`` of the problem's conditions (collective)."""

@@ -437,18 +437,22 @@ def cathode_slot(scene: Scene, *, mechanics: bool = True, voltage: float = 0.05)
     return Problem(scene, materials, contacts, conditions)
 
 
-def hot_squeezed_bars(scene: Scene) -> Problem:
+def hot_squeezed_bars(scene: Scene, *, storage: bool = False) -> Problem:
     """Temperature and displacement, a linear bulk and contact laws of pressure and temperature.
 
     The bars of :func:`bars_scene` as steel (constant k, E, α: the bulk's Jacobian does not
     change), squeezed 20 µm between walls at 300 K and 350 K; the contact closes by an
     exponential law (stiffening by e every 0.1 mm) and conducts
     h(p, T) = PowerLaw(p) (1 + 1e-3 (T − 300)). Only the contact blocks change from one Newton
-    step to the next.
+    step to the next. With ``storage``, steel stores heat (plain carbon steel, AISI 1010:
+    ρ = 7832 kg/m³, c_p = 434 J/(kg K); Incropera et al., 6th ed., table A.1): in time, the
+    bulk matrices stay the same at a fixed step.
     """
     steel = Material(
         conductivity=45.0, young=2e11, poisson=0.3, expansion=1.2e-5, reference_temperature=300.0
     )
+    if storage:
+        steel = replace(steel, density=7832.0, heat_capacity=434.0)
     h = laws.PowerLaw(scale=5e3, hardness=1e7, exponent=0.8, floor=100.0)
     contact = Contact(
         conductance=lambda p, T: h(p, T) * (1 + 1e-3 * (T - 300.0)),
