@@ -77,9 +77,10 @@ class Material:
     Attributes:
         conductivity: Thermal conductivity k(T) [W/(m K)]: a number or a law ``(p, T)``.
         electrical_conductivity: σ(T) [S/m].
-        young: Young's modulus E [Pa].
+        young: Young's modulus E(T) [Pa]: a number or a law ``(p, T)``.
         poisson: Poisson's ratio ν.
-        expansion: Linear thermal expansion α [1/K].
+        expansion: Linear thermal expansion α(T) [1/K], secant from the reference
+            temperature (thermal strain α(T) (T − T_ref)): a number or a law ``(p, T)``.
         reference_temperature: Temperature [K] of zero thermal strain; required with
             ``expansion``.
         heat_source: Volumetric heat source [W/m^3] (besides Joule heat): a number, or a
@@ -91,9 +92,9 @@ class Material:
 
     conductivity: float | Law | None = None
     electrical_conductivity: float | Law | None = None
-    young: float | None = None
+    young: float | Law | None = None
     poisson: float = 0.3
-    expansion: float = 0.0
+    expansion: float | Law = 0.0
     reference_temperature: float | None = None
     heat_source: float | SpaceTime = 0.0
     density: float | None = None
@@ -150,6 +151,8 @@ class Contact:
         gap: Initial gap [m] between the two sides (0: touching).
         pressure: Pressure [Pa] the laws see when the scene has no displacement field.
         temperature: Temperature [K] the laws see when the scene has no temperature field.
+        joule_to_first: Share of the contact's Joule heat g Δφ² deposited on the interface's
+            first body (``Interface.bodies[0]``), the rest on the second; default one half.
         open_stiffness: Stiffness, relative to the normal law's (capped at 1e6 E / h, h the
             body's cell size at the contact), that ties the master layer of an open contact
             to its slaves: in the master equation, and in the bodies' Newton matrix as a
@@ -164,6 +167,7 @@ class Contact:
     gap: float = 0.0
     pressure: float = 0.0
     temperature: float = 0.0
+    joule_to_first: float = 0.5
     open_stiffness: float = 1e-9
 
 
@@ -372,12 +376,13 @@ class Problem:
             value = getattr(m, attr)
             if value is not None and not callable(value):
                 check_finite(value, f"body '{name}': {attr}", positive=True)
-        check_finite(m.expansion, f"body '{name}': expansion")
+        if not callable(m.expansion):
+            check_finite(m.expansion, f"body '{name}': expansion")
         if not is_space_time(m.heat_source):
             check_finite(m.heat_source, f"body '{name}': heat_source")
         if m.reference_temperature is not None:
             check_finite(m.reference_temperature, f"body '{name}': reference_temperature")
-        elif m.expansion != 0 and m.young is not None:
+        elif (callable(m.expansion) or m.expansion != 0) and m.young is not None:
             raise ValueError(
                 f"body '{name}': expansion = {m.expansion} needs reference_temperature, the "
                 "temperature [K] of zero thermal strain (for cast parts, their solidus)"
@@ -413,8 +418,12 @@ class Problem:
             check_finite(c.normal.stiffness, f"interface '{name}': normal stiffness", positive=True)
         if c.tangential not in ("free", "stuck"):
             raise ValueError(f"interface '{name}': tangential = {c.tangential!r}: free or stuck")
-        for attr in ("gap", "pressure", "temperature"):
+        for attr in ("gap", "pressure", "temperature", "joule_to_first"):
             check_finite(getattr(c, attr), f"interface '{name}': {attr}")
+        if not 0 <= c.joule_to_first <= 1:
+            raise ValueError(
+                f"interface '{name}': joule_to_first = {c.joule_to_first}: a share, in [0, 1]"
+            )
         check_finite(c.open_stiffness, f"interface '{name}': open_stiffness", positive=True)
         if c.open_stiffness > 1e-9:
             raise ValueError(
@@ -651,13 +660,17 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
             bulk += form
     links, fluxes, remainders, ties = {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
-    young = problem.materials[body.name].young
-    stiffness = constant(young or 0.0) / ufl.CellDiameter(mesh)  # the bulk's, per area [Pa/m]
+    material = problem.materials[body.name]
+    at_reference = constant(material.reference_temperature or 0.0)
+    young = _law(material.young or 0.0, constant)(ufl.as_ufl(0.0), at_reference)
+    stiffness = young / ufl.CellDiameter(mesh)  # the bulk's, per area [Pa/m]
     for i in interfaces:
         Um = masters[i.name]
         jump = {f: u[f] - um for f, um in split_fields(Um, fields).items()}
+        contact = problem.contacts[i.name]
+        share = contact.joule_to_first if i.bodies[0] == body.name else 1 - contact.joule_to_first
         link, joule, tie, contact_laws = _half_link(
-            problem.contacts[i.name], jump, split_fields(Um, fields), v, n, constant, stiffness
+            contact, jump, split_fields(Um, fields), v, n, constant, stiffness, share
         )
         # one quadrature for every term of the half-link (its link, flux, Joule heat and tie),
         # that of the whole: the master equation then sums exactly what the bodies feel
@@ -714,12 +727,15 @@ def _bulk(
             joule = sigma * ufl.inner(ufl.grad(phi), ufl.grad(phi))
             sources.append(-joule * v["temperature"])
     if "displacement" in u:
-        E, nu = constant(m.young), constant(m.poisson)
+        E, nu = _law(m.young, constant)(zero, T), constant(m.poisson)
+        if callable(m.young) and "temperature" in u:
+            laws["young"] = E
         lmbda, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
         strain = ufl.sym(ufl.grad(u["displacement"]))
         stress = lmbda * ufl.tr(strain) * ufl.Identity(dim) + 2 * mu * strain
-        if m.expansion != 0:
-            thermal = (3 * lmbda + 2 * mu) * constant(m.expansion) * (T - reference)
+        if callable(m.expansion) or m.expansion != 0:
+            alpha = _law(m.expansion, constant)(zero, T)
+            thermal = (3 * lmbda + 2 * mu) * alpha * (T - reference)
             stress -= thermal * ufl.Identity(dim)
         terms.append(ufl.inner(stress, ufl.sym(ufl.grad(v["displacement"]))))
     bulk = sum((t * ufl.dx for t in terms[1:]), terms[0] * ufl.dx)
@@ -752,12 +768,15 @@ def _half_link(
     n: Expr,
     constant: Callable[[float], Expr],
     bulk_stiffness: Expr,
+    share: float = 0.5,
 ) -> tuple[Expr, Expr | None, Expr | None, dict[str, Expr]]:
     """The half-link's terms tested with ``v``.
 
-    Returns the terms the body feels (the fluxes minus the contact's Joule heat deposited
-    on its side), that Joule heat term (or None), the open side's tie (or None), and the
-    contact's conductances h(p, T_m), g(p, T_m) by name (UFL). The tie's stiffness is
+    ``share`` of the contact's Joule heat is deposited on this side: the half-link's own,
+    2 g (φ_s − φ_m)² (half of g Δφ² when φ_m sits midway), times 2 ``share``. Returns the
+    terms the body feels (the fluxes minus the contact's Joule heat deposited on its side),
+    that Joule heat term (or None), the open side's tie (or None), and the contact's
+    conductances h(p, T_m), g(p, T_m) by name (UFL). The tie's stiffness is
     ``open_stiffness`` times the normal law's, capped at 1e6 ``bulk_stiffness`` (the body's
     E / h at the facet) [Pa/m].
     """
@@ -790,7 +809,7 @@ def _half_link(
         current = 2.0 * laws["electrical_conductance"] * jump["potential"]
         body += current * v["potential"]
         if "temperature" in jump:
-            joule = -current * jump["potential"] * v["temperature"]
+            joule = -constant(2 * share) * current * jump["potential"] * v["temperature"]
             body += joule
     return body, joule, tie, laws
 

@@ -1,5 +1,7 @@
 """Thermo-electro-mechanical contact: closed forms, the monolithic Newton, laws and errors."""
 
+import dataclasses
+
 import dolfinx
 import numpy as np
 import pytest
@@ -521,3 +523,52 @@ def test_three_bodies_two_interfaces_match_the_monolithic_newton(comm):
     # block Jacobi across the two interfaces of the middle body contracts slowly (the middle
     # body's two sides see each other's corrections a round late): measured 63 rounds
     assert max(rounds["jacobi"]) > 20
+
+
+@pytest.mark.parametrize("share", [0.8, 0.0])
+def test_the_contact_joule_heat_goes_where_it_is_told(bars, comm, share):
+    """``joule_to_first``: that share of g Δφ² into bar A, the rest into B, against the
+    closed form with the same split (nodally exact, as the even split)."""
+    problem = joule_problem(bars)
+    contact = dataclasses.replace(problem.contacts["contact"], joule_to_first=share)
+    problem = sc.Problem(bars, problem.materials, {"contact": contact}, problem.conditions)
+    system = make_system(problem)
+    system.reset({"temperature": 300.0})
+    sc.solve(system, rtol=1e-12)
+    exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 0.5, 300.0, 320.0, share)
+    temperature = {"plate_A": exact.thermal.temperature_a, "plate_B": exact.thermal.temperature_b}
+    assert max_nodal_error(system, temperature, "temperature", comm) < 1e-10  # as the first
+    even = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 0.5, 300.0, 320.0)
+    middle = np.array([0.5])
+    shift = abs(exact.thermal.temperature_a(middle) - even.thermal.temperature_a(middle))[0]
+    assert shift > 1e-3  # the split matters here: the test can tell
+    assert sc.balance(system)["heat"]["relative"] < 1e-10
+    with pytest.raises(ValueError, match="joule_to_first"):
+        sc.Problem(
+            bars,
+            problem.materials,
+            {"contact": dataclasses.replace(contact, joule_to_first=1.5)},
+            problem.conditions,
+        )
+
+
+def test_young_and_expansion_may_follow_the_temperature(bars, comm):
+    """E(T) and α(T) (secant from the reference temperature) at a uniform 350 K: the blocks
+    between walls see the constants E(350), α(350): the closed form with those, to round-off
+    as the constant case."""
+    base = expansion_problem(bars, 350.0)
+    steel = dataclasses.replace(
+        base.materials["plate_A"],
+        young=lambda p, T: 200e9 * (1 - 4e-4 * (T - 300.0)),
+        expansion=lambda p, T: 1.2e-5 * (1 + 2e-3 * (T - 300.0)),
+    )
+    problem = sc.Problem(bars, {"plate_A": steel, "plate_B": steel}, base.contacts, base.conditions)
+    system = make_system(problem)
+    system.reset({"temperature": 300.0})
+    sc.solve(system, rtol=1e-12)
+    young, alpha = 200e9 * (1 - 4e-4 * 50.0), 1.2e-5 * (1 + 2e-3 * 50.0)
+    exact = BlocksBetweenWalls((0.5, 0.5), (young,) * 2, (0.3,) * 2, (alpha,) * 2, 1e-4, 1e13)
+    force = sc.force(system, "contact")
+    assert force[0] / 0.1 == pytest.approx(exact.pressure(50.0), rel=1e-9)
+    constant = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, 1e-4, 1e13)
+    assert abs(exact.pressure(50.0) / constant.pressure(50.0) - 1) > 1e-2  # the laws matter

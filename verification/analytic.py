@@ -19,8 +19,9 @@ class TwoPlates:
 
     Plate A spans ``0 ≤ x ≤ length_a``, plate B ``length_a ≤ x ≤ length_a + length_b``;
     ``T(0) = t_left``, ``T(end) = t_right``; constant sources; the contact at ``x = length_a``
-    passes ``q = h (T_A − T_B)`` and releases ``contact_heat`` [W/m^2], half into each plate
-    (the half-links' Joule heat). The exact solution is piecewise quadratic with a jump q/h.
+    passes ``q = h (T_A − T_B)`` and releases ``contact_heat`` [W/m^2], ``share_a`` of it into
+    plate A and the rest into B (the contact's Joule heat). The exact solution is piecewise
+    quadratic with a jump q/h.
     Units: m, W/(m K), W/m^3, K, W/(m^2 K).
     """
 
@@ -34,6 +35,7 @@ class TwoPlates:
     source_a: float = 0.0
     source_b: float = 0.0
     contact_heat: float = 0.0
+    share_a: float = 0.5
 
     @property
     def flux(self) -> float:
@@ -44,20 +46,23 @@ class TwoPlates:
             + self.source_a * self.length_a**2 / (2 * self.k_a)
             - self.source_b * self.length_b**2 / (2 * self.k_b)
         )
-        drive += self.contact_heat / 2 * (self.length_a / self.k_a - self.length_b / self.k_b)
+        drive += self.contact_heat * (
+            self.share_a * self.length_a / self.k_a - (1 - self.share_a) * self.length_b / self.k_b
+        )
         if self.h == 0:  # insulating: no heat crosses
             return 0.0
         return drive / (self.length_a / self.k_a + 1 / self.h + self.length_b / self.k_b)
 
     def temperature_a(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Temperature [K] in plate A at abscissae x [m]."""
-        slope = (self.source_a * self.length_a - self.flux + self.contact_heat / 2) / self.k_a
+        deposited = self.share_a * self.contact_heat
+        slope = (self.source_a * self.length_a - self.flux + deposited) / self.k_a
         return self.t_left + slope * x - self.source_a * x**2 / (2 * self.k_a)
 
     def temperature_b(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Temperature [K] in plate B at abscissae x [m]."""
         s = x - self.length_a
-        leaving = self.flux + self.contact_heat / 2  # into B at the contact
+        leaving = self.flux + (1 - self.share_a) * self.contact_heat  # into B at the contact
         start = (
             self.t_right
             + leaving * self.length_b / self.k_b
@@ -74,7 +79,7 @@ class JouleBars:
     x = 0 and 0 at the far end; temperatures ``t_left`` and ``t_right`` there. Constant
     conductivities k [W/(m K)], σ [S/m] and contact conductances h [W/(m^2 K)], g [S/m^2].
     The potential is piecewise linear with a jump j/g; Joule heat j²/σ warms the bars and
-    j²/g the contact (half into each side).
+    j²/g the contact (``share_a`` of it into bar A, the rest into B).
     """
 
     length_a: float
@@ -88,6 +93,7 @@ class JouleBars:
     voltage: float
     t_left: float
     t_right: float
+    share_a: float = 0.5
 
     @property
     def current_density(self) -> float:
@@ -111,7 +117,7 @@ class JouleBars:
         j2 = self.current_density**2
         return TwoPlates(
             self.length_a, self.length_b, self.k_a, self.k_b, self.h, self.t_left,
-            self.t_right, j2 / self.sigma_a, j2 / self.sigma_b, j2 / self.g,
+            self.t_right, j2 / self.sigma_a, j2 / self.sigma_b, j2 / self.g, self.share_a,
         )  # fmt: skip
 
 
