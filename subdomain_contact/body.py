@@ -145,6 +145,9 @@ class Body:
         self.A_bulk = dolfinx.fem.petsc.create_matrix(self.a_bulk)
         unknowns = [U, *f.masters.values()]
         self.bulk_is_linear = not _depends_on(a_bulk, [U])
+        #: The form coefficients the bulk matrix holds: when one changes (a time step's
+        #: data, a switched convection), the matrix is assembled and factorised again.
+        self.matrix_constants = set(ufl.algorithms.expand_derivatives(a_bulk).constants())
         blocks: dict[str, dict[str, ufl.Form]] = {}
         self._linearised = {  # the links as the Jacobian sees them: with the open ties
             k: f.links[k] if f.ties[k] is None else f.links[k] + f.ties[k] for k in self.layers

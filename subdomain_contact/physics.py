@@ -278,10 +278,14 @@ class HeatFlux:
 
 @dataclass(frozen=True)
 class Convection:
-    """Robin condition q = coefficient (ambient − T): coefficient [W/(m^2 K)], ambient [K]."""
+    """Robin condition q = coefficient (ambient − T): coefficient [W/(m^2 K)], ambient [K].
+
+    Either may follow a :class:`Schedule` (a coefficient that switches from 0 at a time: a
+    boundary uncovered during a run).
+    """
 
     boundary: str
-    coefficient: float
+    coefficient: float | Schedule
     ambient: float | Schedule
 
 
@@ -462,7 +466,7 @@ class Problem:
                     "or a function (x, t); functions of x alone are for Temperature, "
                     "Potential and Displacement"
                 )
-            if isinstance(bc, Convection) and bc.coefficient < 0:
+            if isinstance(bc, Convection) and _least(bc.coefficient) < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
             if isinstance(bc, Displacement) and bc.component not in range(dim):
                 raise ValueError(f"boundary '{bc.boundary}': no component {bc.component}")
@@ -484,7 +488,11 @@ class Problem:
             bc.boundary
             for bc in self.conditions
             if (FIELD_OF[type(bc)] == field_name and isinstance(bc, Temperature | Potential))
-            or (isinstance(bc, Convection) and bc.coefficient > 0 and field_name == "temperature")
+            or (
+                isinstance(bc, Convection)
+                and _least(bc.coefficient) > 0
+                and field_name == "temperature"
+            )
         }
         joining = [k for k in scene.interfaces if not self.insulating(k, field_name)]
         members = scene.unanchored(joining, anchors)
@@ -607,6 +615,11 @@ def _space(mesh: dolfinx.mesh.Mesh, fields: tuple[str, ...]) -> dolfinx.fem.Func
 
 def _constant(mesh: dolfinx.mesh.Mesh) -> Callable[[float], dolfinx.fem.Constant]:
     return lambda value: dolfinx.fem.Constant(mesh, dolfinx.default_scalar_type(value))
+
+
+def _least(value: float | Schedule) -> float:
+    """A number, or the least value a schedule takes."""
+    return min(value.values) if isinstance(value, Schedule) else value
 
 
 def _law(value: float | Law, constant: Callable[[float], Expr]) -> Law:
@@ -833,7 +846,7 @@ def _neumann(
         elif isinstance(bc, CurrentDensity):
             form = -constant(bc.value) * v["potential"] * dS
         elif isinstance(bc, Convection):
-            T, hc = u["temperature"], constant(bc.coefficient)
+            T, hc = u["temperature"], constant(bc.coefficient)  # a number or a Schedule
             form = hc * (T - constant(bc.ambient)) * v["temperature"] * dS
         else:
             continue

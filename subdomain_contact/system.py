@@ -260,12 +260,18 @@ class System:
     def set_time(self, time: float) -> None:
         """Data that follow a ``Schedule`` or a function ``(x, t)`` take their value at ``time``."""
         for body in self.bodies.values():
-            if body.forms.time is not None:
+            changed = []
+            if body.forms.time is not None and float(body.forms.time.value) != time:
                 body.forms.time.value = time
+                changed.append(body.forms.time)
             for coefficient, schedule in body.forms.timed:
-                coefficient.value = schedule.at(time)
+                if float(coefficient.value) != schedule.at(time):
+                    coefficient.value = schedule.at(time)
+                    changed.append(coefficient)
             for data, expression in body.forms.moving:
                 data.interpolate(expression)
+            if any(c in body.matrix_constants for c in changed):
+                body.bulk_changed()  # e.g. a convection coefficient that switched
 
     def breakpoints(self) -> list[float]:
         """Every time [s] listed by a ``Schedule`` of the problem's conditions (collective)."""

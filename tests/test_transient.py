@@ -296,6 +296,44 @@ def test_a_flux_switched_on_at_a_time(comm):
         sc.Schedule((0.0, 1.0, 1.0, 1.0), (0.0, 1.0, 2.0, 3.0))
 
 
+def test_a_boundary_uncovered_at_a_time(comm):
+    """A convection coefficient switched from 0 to 50 W/(m² K) at t = 4e5 s (ambient 0 K,
+    the plates held at 1 K on the left): no heat leaves the top before the switch, and
+    after it the heat through the group is its assembled load, h ∫ (T_amb − T) ds; the
+    balance of every step closes, stored heat included."""
+    scene = two_plates_scene(4, 2, comm=comm)
+    uncovered = sc.Schedule((0.0, 4e5, 4e5), (0.0, 0.0, 50.0))
+    problem = sc.Problem(
+        scene,
+        {n: sc.Material(conductivity=1.0, density=1e3, heat_capacity=1e3) for n in scene.bodies},
+        {"contact": sc.Contact(conductance=10.0)},
+        [sc.Temperature("left", 1.0), sc.Convection("top", uncovered, 0.0)],
+    )
+    system = make_system(problem)
+    system.reset()
+    stepper = sc.Stepper(system, "backward_euler")
+    top = {}
+
+    def record(s, result):
+        top[s.time] = sc.heat(system, "top")
+        assert sc.balance(system)["heat"]["relative"] < 1e-10  # as in the first test
+
+    stepper.march(8e5, 2e5, after_step=record, rtol=1e-12)
+    assert sorted(top) == [2e5, 4e5, 6e5, 8e5]
+    assert top[2e5] == 0.0 and top[4e5] == 0.0
+    # after: heat leaves through the top, 50 W/(m² K) × ∫ (0 − T) ds < 0, a few W
+    expected = -50.0 * sc.average(system, "top", "temperature") * 2.0  # the top is 2 m long
+    assert top[8e5] == pytest.approx(expected, rel=1e-12)
+    assert top[6e5] < -1e-3
+    with pytest.raises(ValueError, match="coefficient must be >= 0"):
+        sc.Problem(
+            scene,
+            problem.materials,
+            problem.contacts,
+            [sc.Temperature("left", 1.0), sc.Convection("top", sc.Schedule((0, 1), (1, -1)), 0)],
+        )
+
+
 @pytest.mark.parametrize(("scheme", "order"), [("backward_euler", 1), ("bdf2", 2)])
 def test_a_manufactured_solution_in_time_with_a_contact(comm, scheme, order):
     """Data that vary in space and time (sc.Temperature, sc.HeatFlux and the heat source as
