@@ -17,7 +17,9 @@
 #   electrical resistance, the mean contact pressure, the heat balance of every step;
 # * the end state against the steady solver's answer;
 # * a VTK time series (`series.pvd`: one scene, its time steps), checkpoints, and restart:
-#   stop it with Ctrl-C (or SIGTERM) and run it again with `--restart`.
+#   stop it with Ctrl-C (or SIGTERM) and run it again with `--restart`;
+# * first, the schemes themselves: two slabs with a contact conductance against the series
+#   solution, the error against time and against the step (`series_error.png`).
 #
 # ## The problem
 #
@@ -40,11 +42,16 @@ import time
 from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
 import numpy as np
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from verification.cases import GEO, warming_joule_bars
+from verification.analytic import CompositeSlab
+from verification.cases import GEO, two_plates_scene, warming_joule_bars
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--small", action="store_true", help="a coarse mesh and a short run")
@@ -135,6 +142,74 @@ if not args.small:
     to_steady = system.difference(x, steady.state())
     steady.destroy()
     say(f"end state vs steady solve, per field: {to_steady}")
+
+# ## Verification: two slabs with a contact conductance against the series solution
+#
+# k = 2 and 1 W/(m K), ρ c_p = 4e6 and 1e6 J/(m³ K), h = 10 W/(m² K), from 0 K with the left
+# end raised to 1 K at t = 0 (`verification.analytic.CompositeSlab`, the eigenfunction series
+# of a composite slab with a contact resistance). The error at every step against the series,
+# for both schemes and three step sizes: first and second order.
+
+
+def slab_errors(scheme: str, steps: int, cells: int, end: float) -> list[tuple[float, float]]:
+    """(time [s], largest nodal error [K]) at every step."""
+    slab_scene = two_plates_scene(cells, 1, comm=comm)
+    slabs = sc.Problem(
+        slab_scene,
+        {
+            "plate_A": sc.Material(conductivity=2.0, density=4000.0, heat_capacity=1000.0),
+            "plate_B": sc.Material(conductivity=1.0, density=1000.0, heat_capacity=1000.0),
+        },
+        {"contact": sc.Contact(conductance=10.0)},
+        [sc.Temperature("left", 1.0), sc.Temperature("right", 0.0)],
+    )
+    errors = []
+    with sc.System(slabs) as slab:
+        slab.reset()
+        stepper = sc.Stepper(slab, scheme)
+        for _ in range(steps):
+            stepper.advance(end / steps, rtol=1e-12)
+            worst = 0.0
+            for name, body in slab.bodies.items():
+                points, values = body.nodal("temperature")
+                side = "a" if name == "plate_A" else "b"
+                exact = SERIES.temperature(points[:, 0], stepper.time, side)
+                worst = max(worst, float(np.abs(values - exact).max(initial=0.0)))
+            errors.append((stepper.time, comm.allreduce(worst, op=MPI.MAX)))
+    return errors
+
+
+SERIES = CompositeSlab(1.0, 2.0, 1.0, 4e6, 1e6, 10.0, 1.0, terms=60)
+cells = 128  # P1 error below the schemes' at these steps (1D: cheap)
+series = {
+    scheme: {n: slab_errors(scheme, n, cells, 2e5) for n in (8, 16, 32)}
+    for scheme in sc.transient.SCHEMES
+}
+orders = {
+    scheme: [float(np.log2(runs[n][-1][1] / runs[2 * n][-1][1])) for n in sorted(runs)[:-1]]
+    for scheme, runs in series.items()
+}
+say(f"two slabs against the series, {cells} cells each: observed orders {orders}")
+if comm.rank == 0:
+    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    for scheme, runs in series.items():
+        for n, errors in runs.items():
+            t, e = zip(*errors, strict=True)
+            left.semilogy(np.array(t) / HOUR, e, ".-", label=f"{scheme}, Δt = 2e5/{n} s")
+        ends = [runs[n][-1][1] for n in sorted(runs)]
+        right.loglog([2e5 / n for n in sorted(runs)], ends, "o-", label=scheme)
+    left.set_xlabel("time [h]")
+    left.set_ylabel("largest nodal error [K] (of 1 K)")
+    left.legend(fontsize=7)
+    right.set_xlabel("Δt [s]")
+    right.set_ylabel("error at t = 2e5 s [K]")
+    right.legend()
+    right.grid(True, which="both", alpha=0.3)
+    figure.suptitle("two slabs with a contact conductance against the series solution")
+    figure.tight_layout()
+    figure.savefig(args.out / "series_error.png", dpi=110)
+    plt.close(figure)
+
 end = history.rows[-1]
 say(
     f"{stepper.steps} steps ({stepper.rejected} taken again) to t = {stepper.time / HOUR:.3g} h; "
@@ -153,6 +228,11 @@ report = {
     "end": end,
     "end_vs_steady": to_steady,
     "readback": sc.summary(system),
+    "series": {
+        "cells": cells,
+        "end errors": {s: {n: r[-1][1] for n, r in runs.items()} for s, runs in series.items()},
+        "orders": orders,
+    },
     "seconds": time.perf_counter() - started,
 }
 if comm.rank == 0:

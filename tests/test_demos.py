@@ -257,3 +257,9 @@ def test_demo_transient_joule(shared_tmp, monkeypatch, comm):
         # each bar, its displacement (a vector, a file of its own) and the master layer
         assert reader.read().n_blocks == 5
     assert (out / "history.png").exists() and (out / "end.png").exists()
+    # the schemes against the series (as tests/test_transient.py: measured 0.999, 1.001 and
+    # 2.35, 2.02; ±0.15 on the finer pair)
+    orders = report["series"]["orders"]
+    assert abs(orders["backward_euler"][-1] - 1) <= 0.15
+    assert abs(orders["bdf2"][-1] - 2) <= 0.15
+    assert (out / "series_error.png").exists()
