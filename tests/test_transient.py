@@ -8,8 +8,14 @@ from helpers import make_system
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from verification.analytic import CompositeSlab
-from verification.cases import bars_scene, joule_bars, two_plates_scene, warming_joule_bars
+from verification.cases import (
+    bars_scene,
+    composite_slabs,
+    joule_bars,
+    slab_error,
+    two_plates_scene,
+    warming_joule_bars,
+)
 
 
 def heated_plates(scene, *, capacity=True):
@@ -103,17 +109,7 @@ def test_steps_converge_to_the_series_solution_at_their_order(comm, scheme, orde
     ±0.15 on the finer pair's rate holds the next term of the error expansion (0.35 on the
     coarse BDF2 pair, halving with each pair) and the spatial error (128 P1 cells).
     """
-    scene = two_plates_scene(128, 1, comm=comm)
-    problem = sc.Problem(
-        scene,
-        {
-            "plate_A": sc.Material(conductivity=2.0, density=4000.0, heat_capacity=1000.0),
-            "plate_B": sc.Material(conductivity=1.0, density=1000.0, heat_capacity=1000.0),
-        },
-        {"contact": sc.Contact(conductance=10.0)},
-        [sc.Temperature("left", 1.0), sc.Temperature("right", 0.0)],
-    )
-    series = CompositeSlab(1.0, 2.0, 1.0, 4e6, 1e6, 10.0, 1.0, terms=60)
+    problem, series = composite_slabs(128, comm=comm)
     end, errors = 2e5, []
     for steps in (8, 16, 32):
         system = make_system(problem)
@@ -121,12 +117,7 @@ def test_steps_converge_to_the_series_solution_at_their_order(comm, scheme, orde
         stepper = sc.Stepper(system, scheme)
         for _ in range(steps):
             stepper.advance(end / steps, rtol=1e-12)
-        worst = 0.0
-        for name, body in system.bodies.items():
-            points, values = body.nodal("temperature")
-            exact = series.temperature(points[:, 0], end, "a" if name == "plate_A" else "b")
-            worst = max(worst, float(np.abs(values - exact).max(initial=0.0)))
-        errors.append(comm.allreduce(worst, op=MPI.MAX))
+        errors.append(slab_error(system, series, end))
     rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert order - 0.15 <= rates[-1] <= order + 0.15, (errors, rates)
     assert errors[-1] < 1e-2  # and the series is what they converge to
@@ -170,30 +161,6 @@ def test_a_voltage_ramp_drives_the_current_at_every_step(comm, shared_tmp):
     assert stepper.time == 21600.0
 
 
-def slabs(comm, cells=64):
-    """The two slabs of the series test and their series solution."""
-    scene = two_plates_scene(cells, 1, comm=comm)
-    problem = sc.Problem(
-        scene,
-        {
-            "plate_A": sc.Material(conductivity=2.0, density=4000.0, heat_capacity=1000.0),
-            "plate_B": sc.Material(conductivity=1.0, density=1000.0, heat_capacity=1000.0),
-        },
-        {"contact": sc.Contact(conductance=10.0)},
-        [sc.Temperature("left", 1.0), sc.Temperature("right", 0.0)],
-    )
-    return problem, CompositeSlab(1.0, 2.0, 1.0, 4e6, 1e6, 10.0, 1.0, terms=60)
-
-
-def error_against(series, system, time, comm):
-    worst = 0.0
-    for name, body in system.bodies.items():
-        points, values = body.nodal("temperature")
-        exact = series.temperature(points[:, 0], time, "a" if name == "plate_A" else "b")
-        worst = max(worst, float(np.abs(values - exact).max(initial=0.0)))
-    return comm.allreduce(worst, op=MPI.MAX)
-
-
 @pytest.mark.parametrize(("scheme", "order"), [("backward_euler", 1), ("bdf2", 2)])
 def test_the_error_estimate_and_the_adaptive_steps_follow_the_order(comm, scheme, order):
     """The local error estimate scales as Δt^{p+1} at fixed steps; adaptive steps that hold
@@ -209,7 +176,7 @@ def test_the_error_estimate_and_the_adaptive_steps_follow_the_order(comm, scheme
     number of short steps that does not depend on tol, which flattens both slopes: ±0.07 on
     the step count, ±0.12 on the error.
     """
-    problem, series = slabs(comm)
+    problem, series = composite_slabs(64, comm=comm)
     estimates = []
     for step in (4e3, 2e3, 1e3):
         system = make_system(problem)
@@ -228,7 +195,7 @@ def test_the_error_estimate_and_the_adaptive_steps_follow_the_order(comm, scheme
         stepper.march(2e5, 1e3, tolerance=tolerance, rtol=1e-12)
         assert stepper.time == 2e5
         steps.append(stepper.steps)
-        errors.append(error_against(series, system, 2e5, comm))
+        errors.append(slab_error(system, series, 2e5))
     step_slope = -np.polyfit(np.log10(tolerances), np.log10(steps), 1)[0]
     error_slope = np.polyfit(np.log10(tolerances), np.log10(errors), 1)[0]
     assert abs(step_slope - 1 / (order + 1)) <= 0.07, (steps, step_slope)

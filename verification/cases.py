@@ -24,7 +24,8 @@ from subdomain_contact.physics import (
     Temperature,
 )
 from subdomain_contact.scene import Scene, load_scene
-from verification.analytic import BlocksBetweenWalls, JouleBars, TwoPlates
+from verification.analytic import BlocksBetweenWalls, CompositeSlab, JouleBars, TwoPlates
+from verification.nodal import error_against
 
 __all__ = [
     "GEO",
@@ -33,9 +34,11 @@ __all__ = [
     "blocks3d_scene",
     "cathode_slot",
     "cathode_slot_scene",
+    "composite_slabs",
     "heated_blocks",
     "hot_squeezed_bars",
     "joule_bars",
+    "slab_error",
     "squeezed_joule_bars",
     "squeezed_row",
     "stack",
@@ -320,6 +323,40 @@ def squeezed_joule_bars(scene: Scene, *, voltage: float = 0.5) -> Problem:
             Displacement("right", 0, -2e-5),
             Displacement("bottom", 1, 0.0),
         ],
+    )
+
+
+def composite_slabs(
+    cells: int, *, comm: MPI.Comm = MPI.COMM_WORLD
+) -> tuple[Problem, CompositeSlab]:
+    """Two slabs of 1 m (``cells`` each, one row) heated from one end, and their series.
+
+    k = 2 and 1 W/(m K), ρ c_p = 4e6 and 1e6 J/(m³ K), h = 10 W/(m² K); from 0 K, the left
+    end at 1 K from t = 0, the right end at 0 K (:class:`~verification.analytic.CompositeSlab`).
+    """
+    problem = Problem(
+        two_plates_scene(cells, 1, comm=comm),
+        {
+            "plate_A": Material(conductivity=2.0, density=4000.0, heat_capacity=1000.0),
+            "plate_B": Material(conductivity=1.0, density=1000.0, heat_capacity=1000.0),
+        },
+        {"contact": Contact(conductance=10.0)},
+        [Temperature("left", 1.0), Temperature("right", 0.0)],
+    )
+    return problem, CompositeSlab(1.0, 2.0, 1.0, 4e6, 1e6, 10.0, 1.0, terms=60)
+
+
+def slab_error(system, series: CompositeSlab, time: float) -> float:
+    """Largest nodal error [K] of the slabs' temperature against the series at ``time``.
+
+    (Relative to the range of the series, which spans the 1 K between the ends: the same.)
+    """
+    return error_against(
+        system,
+        {
+            "plate_A": lambda x: series.temperature(x[:, 0], time, "a"),
+            "plate_B": lambda x: series.temperature(x[:, 0], time, "b"),
+        },
     )
 
 
