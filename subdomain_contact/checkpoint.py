@@ -67,6 +67,7 @@ def save(directory: str | Path, system: System, clock: dict, arrays: dict[str, l
                 label: np.concatenate([v[label] for _, v in gathered])[order] for label in values
             }
             np.savez(partial / f"body_{name}.npz", keys=all_keys[order], **columns)
+    comm.barrier()  # every group's root has written its bodies
     if comm.rank == 0:
         masters = {f"{k}_values": v for k, v in system.masters.items()}
         points = {f"{k}_points": layer.coordinates for k, layer in system.layers.items()}
