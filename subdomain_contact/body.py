@@ -83,6 +83,7 @@ class Body:
     ) -> None:
         self.forms: BodyForms = body_forms(problem, body)
         self.name, self.U, W = body.name, self.forms.U, self.forms.W
+        self.scene_body = body  # the mesh, its tags and its file node numbers
         self.comm: MPI.Comm = W.mesh.comm
         self.prefix = prefix
         self.layers = layers

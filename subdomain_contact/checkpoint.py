@@ -143,12 +143,12 @@ def load(folder: str | Path, system: System, labels: dict[str, int]) -> tuple[di
 def _keys(body: Body) -> npt.NDArray[np.int64]:
     """A partition-independent key of every local entry of the body's state (ghosts too).
 
-    ``input node number × components + component``, components over the body's fields in
+    ``file node number × components + component``, components over the body's fields in
     order (a displacement has one per axis); degree-1 Lagrange spaces put one DOF of each
     component on each node of a degree-1 mesh, in the order of the cell's geometry nodes.
     """
     forms, mesh = body.forms, body.forms.W.mesh
-    nodes = mesh.geometry.input_global_indices.astype(np.int64)
+    nodes = body.scene_body.node_numbers()
     geometry = mesh.geometry.dofmaps[0]
     channels = [
         (field, component)

@@ -35,12 +35,21 @@ class Body:
         mesh: The body's mesh (a submesh of the scene's parent mesh).
         facet_tags: Facet tags of the body mesh, with the parent's physical-group tags.
         boundaries: Facet group name -> tag, for the groups that have facets on this body.
+        file_nodes: The mesh file's number of each local geometry node, where it is not the
+            mesh's own ``input_global_indices`` (a body spread again over a rank group).
     """
 
     name: str
     mesh: dolfinx.mesh.Mesh
     facet_tags: dolfinx.mesh.MeshTags
     boundaries: Mapping[str, int]
+    file_nodes: npt.NDArray[np.int64] | None = None
+
+    def node_numbers(self) -> npt.NDArray[np.int64]:
+        """The mesh file's number of each local geometry node: the same on any partition."""
+        if self.file_nodes is not None:
+            return self.file_nodes
+        return self.mesh.geometry.input_global_indices.astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -262,7 +271,8 @@ def _distribute(body: Body, comm: MPI.Comm) -> Body:
     new_tags = dolfinx.mesh.meshtags_from_entities(
         new, fdim, dolfinx.graph.adjacencylist(local), local_values.astype(np.int32)
     )
-    return Body(body.name, new, new_tags, body.boundaries)
+    numbers = body.node_numbers()[new.geometry.input_global_indices]
+    return Body(body.name, new, new_tags, body.boundaries, numbers)
 
 
 def _mesh_geo(path: Path, parameters: dict[str, float], comm: MPI.Comm) -> dolfinx.io.gmsh.MeshData:

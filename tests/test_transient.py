@@ -392,3 +392,40 @@ def test_a_manufactured_solution_in_time_with_a_contact(comm, scheme, order):
         errors.append(comm.allreduce(worst, op=MPI.MAX))
     rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert abs(rates[-1] - order) <= 0.1, (errors, rates)
+
+
+def test_a_checkpoint_moves_between_placements(comm, shared_tmp):
+    """A checkpoint keys each body's values by the mesh file's node numbers and the master
+    values by their coordinates: written by bodies spread over every rank, it loads into
+    bodies on rank groups, and back, to the same value at every node (exactly)."""
+    from subdomain_contact import checkpoint
+    from subdomain_contact.scene import match_points
+    from verification.nodal import NodalReference, error_against, field_values
+
+    def stepped(placement):
+        scene = two_plates_scene(6, 6, comm=comm, placement=placement)
+        system = make_system(heated_plates(scene))
+        system.reset()
+        return system
+
+    spread = stepped("shared")
+    stepper = sc.Stepper(spread, "bdf2")
+    for _ in range(2):
+        stepper.advance(2e5, rtol=1e-12)
+    clock = {"steps": 2, "time": stepper.time}
+    first = checkpoint.save(shared_tmp / "a", spread, clock, {})
+    reference = NodalReference(*field_values(spread))
+    grouped = stepped("groups")
+    assert checkpoint.load(first, grouped, {})[0] == clock
+    assert error_against(grouped, reference.at(field_values(grouped)[0])) == 0.0
+    again = stepped("shared")
+    checkpoint.load(checkpoint.save(shared_tmp / "b", grouped, clock, {}), again, {})
+    assert error_against(again, reference.at(field_values(again)[0])) == 0.0
+    for k, layer in spread.layers.items():
+        index = match_points(layer.coordinates, again.layers[k].coordinates, what=k)
+        assert np.array_equal(again.masters[k], spread.masters[k][index])
+    for name, body in again.bodies.items():  # the previous times too
+        assert np.array_equal(
+            body.forms.history[0].x.array, spread.bodies[name].forms.history[0].x.array
+        )
+    assert checkpoint.latest(shared_tmp / "b", comm).name == "step_000002"
