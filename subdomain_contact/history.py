@@ -98,6 +98,9 @@ class History:
             Whether a checkpoint was loaded (False: a fresh run, files emptied).
         """
         found = checkpoint.latest(self.directory / "checkpoints", self.comm) if restart else None
+        if restart and found is None:
+            where = self.directory / "checkpoints"
+            self._say(f"no checkpoint in {where}: a fresh run", always=True)
         if found is None:
             if self.comm.rank == 0:
                 for stale in ("history.csv", "history.json", "series.pvd", "vtk", "checkpoints"):
