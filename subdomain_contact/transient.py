@@ -105,7 +105,6 @@ class Stepper:
         if not 0.0 < step < float("inf"):
             raise ValueError(f"advance: step = {step!r} s: must be a finite number > 0")
         self._keep_for_undo()
-        before = self._states()
         self.system.set_rates(self.rates(step))
         self.system.set_time(self.time + step)  # the conditions at the step's end
         self.system.keep_previous()
@@ -114,7 +113,7 @@ class Stepper:
         except (NewtonConvergenceError, SubdomainConvergenceError, LawRangeError):
             self.undo()
             raise
-        self.past = [(self.time, before), *self.past[: self.order]]
+        self.past = [(self.time, self._undo[0]), *self.past[: self.order]]
         self.time, self.steps, self._last = self.time + step, self.steps + 1, step
         return result
 
@@ -122,31 +121,28 @@ class Stepper:
         """Put back the state before the latest step (once)."""
         if self._undo is None:
             raise RuntimeError("undo: no step to undo")
-        state, history, clock = self._undo
-        self.system.set_state(state)
-        for name, body in self.system.bodies.items():
+        states, masters, history, clock = self._undo
+        system = self.system
+        for name, body in system.bodies.items():
+            body.U.x.array[:] = states[name]  # ghosts included
             for h, values in zip(body.forms.history, history[name], strict=True):
                 h.x.array[:] = values
+        system.masters = masters
+        for body in system.bodies.values():
+            body.set_masters(masters)
         self.time, self.steps, self._last, self.past = clock
-        self.system.set_time(self.time)
-        state.destroy()
+        system.set_time(self.time)
         self._undo = None
 
     def _keep_for_undo(self) -> None:
-        if self._undo is not None:
-            self._undo[0].destroy()
-        history = {
-            name: [h.x.array.copy() for h in body.forms.history]
-            for name, body in self.system.bodies.items()
-        }
+        """Copy what a step changes: states, masters, histories, clock (NumPy: no PETSc)."""
+        bodies = self.system.bodies
         self._undo = (
-            self.system.state(),
-            history,
+            {name: body.U.x.array.copy() for name, body in bodies.items()},
+            {k: v.copy() for k, v in self.system.masters.items()},
+            {name: [h.x.array.copy() for h in body.forms.history] for name, body in bodies.items()},
             (self.time, self.steps, self._last, list(self.past)),
         )
-
-    def _states(self) -> dict[str, Vector]:
-        return {name: body.U.x.array.copy() for name, body in self.system.bodies.items()}
 
     def rates(self, step: float) -> tuple[float, float]:
         """The weights (r₀, r₁) [1/s] of the time derivative for a step of ``step`` [s]."""
