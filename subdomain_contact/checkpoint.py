@@ -90,24 +90,23 @@ def latest(directory: str | Path, comm: MPI.Comm) -> Path | None:
     return None if name is None else Path(directory) / name
 
 
-def load(folder: str | Path, system: System, labels: dict[str, int]) -> tuple[dict, dict]:
+def load(folder: str | Path, system: System) -> tuple[dict, dict]:
     """Put a checkpoint's state into the system (collective).
 
     Args:
         folder: A checkpoint's folder (:func:`latest`).
         system: A system of the same scene and problem (any number of ranks, any placement).
-        labels: How many arrays of each extra label to read back.
 
     Returns:
         The clock, and the extra arrays as ``{label: [{body: array}]}`` (each body's local
-        entries, ghosts included).
+        entries, ghosts included), as many of each label as were saved.
 
     Raises:
         ValueError: A checkpoint of another scene (its nodes or fields are not this one's).
     """
     folder = Path(folder)
     clock = json.loads((folder / "clock.json").read_text())
-    extra: dict[str, list[dict]] = {label: [{} for _ in range(n)] for label, n in labels.items()}
+    extra: dict[str, list[dict]] = {}
     failure = None
     for name, body in system.bodies.items():
         with np.load(folder / f"body_{name}.npz") as data:
@@ -121,9 +120,12 @@ def load(folder: str | Path, system: System, labels: dict[str, int]) -> tuple[di
             body.U.x.array[:] = data["state"][where]
             body.forms.history[0].x.array[:] = data["previous"][where]
             body.forms.history[1].x.array[:] = data["before_previous"][where]
-            for label, past in extra.items():
-                for i, states in enumerate(past):
-                    states[name] = data[f"{label}_{i}"][where]
+            for key in data.files:  # the extras: "<label>_<i>"
+                label, _, i = key.rpartition("_")
+                if label and i.isdigit():
+                    past = extra.setdefault(label, [])
+                    past.extend({} for _ in range(int(i) + 1 - len(past)))
+                    past[int(i)][name] = data[key][where]
     messages = [m for m in system.comm.allgather(failure) if m]
     if messages:
         raise ValueError(f"{messages[0]}: restart from a checkpoint of the same scene")

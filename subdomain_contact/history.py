@@ -117,15 +117,8 @@ class History:
 
     def _resume(self, folder: Path) -> None:
         stepper = self.stepper
-        order = stepper.order + 1
-        numbers, arrays = checkpoint.load(folder, stepper.system, {"past": order})
-        stepper.time, stepper.steps = numbers["time"], numbers["steps"]
-        stepper.rejected, stepper._last = numbers["rejected"], numbers["last"]
-        stepper.next_step = numbers["next_step"]
-        stepper.past = [
-            (t, states) for t, states in zip(numbers["past_times"], arrays["past"], strict=False)
-        ]
-        stepper.system.set_time(stepper.time)
+        numbers, arrays = checkpoint.load(folder, stepper.system)
+        stepper.set_clock(numbers, arrays.get("past", []))
         self._wall = numbers["wall"]
         rows = json.loads((self.directory / "history.json").read_text())["rows"]
         self.rows = [row for row in rows if row["step"] <= stepper.steps]
@@ -170,7 +163,7 @@ class History:
         row = {
             "step": stepper.steps,
             "time [s]": stepper.time,
-            "step [s]": stepper._last,
+            "step [s]": stepper.last_step,
             "rejected": stepper.rejected,
             "newton": result.iterations,
             "rounds": result.rounds,
@@ -201,16 +194,7 @@ class History:
     def save(self) -> Path:
         """Write a checkpoint of the stepper and its system now (collective)."""
         stepper = self.stepper
-        numbers = {
-            "time": stepper.time,
-            "steps": stepper.steps,
-            "rejected": stepper.rejected,
-            "last": stepper._last,
-            "next_step": stepper.next_step,
-            "past_times": [t for t, _ in stepper.past],
-            "wall": self._wall + clock.perf_counter() - self._start,
-            "scheme": stepper.scheme,
-        }
+        numbers = stepper.clock() | {"wall": self._wall + clock.perf_counter() - self._start}
         past = {"past": [states for _, states in stepper.past]}
         self._saved = stepper.steps
         return checkpoint.save(self.directory / "checkpoints", stepper.system, numbers, past)

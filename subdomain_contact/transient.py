@@ -87,6 +87,43 @@ class Stepper:
         """The scheme's order of accuracy."""
         return ORDER[self.scheme]
 
+    @property
+    def last_step(self) -> float | None:
+        """The latest step [s] (None before the first)."""
+        return self._last
+
+    def clock(self) -> dict:
+        """The stepper's numbers, JSON-ready (a checkpoint's), and its past states by time."""
+        return {
+            "scheme": self.scheme,
+            "time": self.time,
+            "steps": self.steps,
+            "rejected": self.rejected,
+            "last": self._last,
+            "next_step": self.next_step,
+            "past_times": [t for t, _ in self.past],
+        }
+
+    def set_clock(self, numbers: dict, past: list[dict[str, Vector]]) -> None:
+        """Go on from :meth:`clock`'s numbers and the past states (a restart).
+
+        Raises:
+            ValueError: A clock of another scheme.
+        """
+        if numbers["scheme"] != self.scheme:
+            raise ValueError(
+                f"a checkpoint of scheme {numbers['scheme']!r}, this stepper's is {self.scheme!r}"
+            )
+        self.time, self.steps, self.rejected = (
+            numbers["time"],
+            numbers["steps"],
+            numbers["rejected"],
+        )
+        self._last, self.next_step = numbers["last"], numbers["next_step"]
+        self.past = list(zip(numbers["past_times"], past, strict=True))
+        self._undo = None
+        self.system.set_time(self.time)
+
     def advance(self, step: float, linear=None, **options) -> Result:
         """One step of ``step`` [s]; Newton starts from the current state.
 
