@@ -26,7 +26,8 @@ pytestmark = pytest.mark.skipif(
 
 
 def start(out: Path, ranks: int, *extra: str) -> subprocess.Popen:
-    command = [sys.executable, str(DEMO), "--small", "--quiet", "--out", str(out), *extra]
+    command = [sys.executable, str(DEMO), "--small", "--quiet", "--no-series", "--out", str(out)]
+    command += extra
     if ranks > 1:
         command = [str(MPIEXEC), "-n", str(ranks), *command]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
