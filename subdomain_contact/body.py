@@ -233,7 +233,8 @@ class Body:
             self.A_bulk.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix(self.A_bulk, self.a_bulk, bcs=self.forms.bcs)
             self.A_bulk.assemble()
-            self._bulk_norms_by_field()
+            if self._bulk_step < 0:  # new data, not a new Newton state: see _bulk_norms_by_field
+                self._bulk_norms_by_field()
         self._bulk_step = self._step
         return self.A_bulk
 
@@ -294,7 +295,14 @@ class Body:
         self._kept_field_dofs = [np.flatnonzero(kept_field == f) for f in range(count)]
 
     def _bulk_norms_by_field(self) -> None:
-        """The bulk matrix's largest row sum on the rows of each field (on every rank)."""
+        """The bulk matrix's largest row sum on the rows of each field (on every rank).
+
+        Scales that choose between two exact forms of the master residual (and bound the
+        round-off of a solve): orders of magnitude matter, not the few per cent a state
+        dependent bulk changes from one Newton step to the next. So they are computed when
+        the bulk's data change (the first assembly, a new time step), not at every Newton
+        step, which would copy the whole matrix each time.
+        """
         indptr, _, data = self.A_bulk.getValuesCSR()
         rows = np.add.reduceat(np.abs(data), indptr[:-1]) if data.size else np.zeros(0)
         rows[indptr[:-1] == indptr[1:]] = 0.0
