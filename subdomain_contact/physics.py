@@ -466,7 +466,7 @@ class Problem:
                     "or a function (x, t); functions of x alone are for Temperature, "
                     "Potential and Displacement"
                 )
-            if isinstance(bc, Convection) and _least(bc.coefficient) < 0:
+            if isinstance(bc, Convection) and (_least(bc.coefficient) or 0.0) < 0:
                 raise ValueError(f"boundary '{bc.boundary}': coefficient must be >= 0")
             if isinstance(bc, Displacement) and bc.component not in range(dim):
                 raise ValueError(f"boundary '{bc.boundary}': no component {bc.component}")
@@ -490,7 +490,7 @@ class Problem:
             if (FIELD_OF[type(bc)] == field_name and isinstance(bc, Temperature | Potential))
             or (
                 isinstance(bc, Convection)
-                and _least(bc.coefficient) > 0
+                and (_least(bc.coefficient) or 0.0) > 0
                 and field_name == "temperature"
             )
         }
@@ -617,9 +617,11 @@ def _constant(mesh: dolfinx.mesh.Mesh) -> Callable[[float], dolfinx.fem.Constant
     return lambda value: dolfinx.fem.Constant(mesh, dolfinx.default_scalar_type(value))
 
 
-def _least(value: float | Schedule) -> float:
-    """A number, or the least value a schedule takes."""
-    return min(value.values) if isinstance(value, Schedule) else value
+def _least(value: float | Schedule | SpaceTime) -> float | None:
+    """A number, the least value a schedule takes, or None for a function (x, t)."""
+    if isinstance(value, Schedule):
+        return min(value.values)
+    return None if callable(value) else value
 
 
 def _law(value: float | Law, constant: Callable[[float], Expr]) -> Law:

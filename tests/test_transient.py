@@ -263,13 +263,21 @@ def test_a_flux_switched_on_at_a_time(comm):
         sc.Schedule((0.0, 1.0, 1.0, 1.0), (0.0, 1.0, 2.0, 3.0))
 
 
-def test_a_boundary_uncovered_at_a_time(comm):
+@pytest.mark.parametrize("given", ["schedule", "function of (x, t)"])
+def test_a_boundary_uncovered_at_a_time(comm, given):
     """A convection coefficient switched from 0 to 50 W/(m² K) at t = 4e5 s (ambient 0 K,
-    the plates held at 1 K on the left): no heat leaves the top before the switch, and
-    after it the heat through the group is its assembled load, h ∫ (T_amb − T) ds; the
-    balance of every step closes, stored heat included."""
+    the plates held at 1 K on the left), as a Schedule or as a function (x, t): no heat
+    leaves the top before the switch, and after it the heat through the group is its
+    assembled load, h ∫ (T_amb − T) ds; the balance of every step closes, stored heat
+    included (the bodies' matrices hold the coefficient: they are factorised again)."""
+    import ufl
+
     scene = two_plates_scene(4, 2, comm=comm)
-    uncovered = sc.Schedule((0.0, 4e5, 4e5), (0.0, 0.0, 50.0))
+    uncovered = (
+        sc.Schedule((0.0, 4e5, 4e5), (0.0, 0.0, 50.0))
+        if given == "schedule"
+        else lambda x, t: 50.0 * ufl.conditional(ufl.gt(t, 4e5), 1.0, 0.0)
+    )
     problem = sc.Problem(
         scene,
         {n: sc.Material(conductivity=1.0, density=1e3, heat_capacity=1e3) for n in scene.bodies},
