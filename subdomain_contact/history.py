@@ -123,9 +123,9 @@ class History:
         rows = json.loads((self.directory / "history.json").read_text())["rows"]
         self.rows = [row for row in rows if row["step"] <= stepper.steps]
         if self.comm.rank == 0:  # VTK steps after the checkpoint are dropped
-            for folder in (self.directory / "vtk").glob("step_*"):
-                if int(folder.name.split("_")[1]) > stepper.steps:
-                    shutil.rmtree(folder)
+            for written in (self.directory / "vtk").glob("step_*"):
+                if int(written.name.split("_")[1]) > stepper.steps:
+                    shutil.rmtree(written)
         self._write_series()
         self._say(
             f"restarted from {folder} at t = {stepper.time:.6g} s, step {stepper.steps}",

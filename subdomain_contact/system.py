@@ -42,6 +42,21 @@ class LawRangeError(ValueError):
         self.at_solution = at_solution
 
 
+def _assign(body: Body, pairs) -> bool:
+    """Give form coefficients of a body new values: ``(constant, value)`` pairs.
+
+    A body whose bulk matrix holds a coefficient that changed is factorised again at the
+    next Newton step. Returns whether any value changed.
+    """
+    pairs = list(pairs)
+    changed = [c for c, value in pairs if float(c.value) != value]
+    for c, value in pairs:
+        c.value = value
+    if any(c in body.matrix_constants for c in changed):
+        body.bulk_changed()
+    return bool(changed)
+
+
 class System:
     """Every body of this rank's group and every master layer of a problem, with its state.
 
@@ -247,31 +262,25 @@ class System:
     def set_rates(self, rates: tuple[float, float]) -> None:
         """The time derivative's weights (r₀, r₁) [1/s] of the next step (0, 0: steady).
 
-        A body whose weights change has a new bulk matrix: it is factorised again at the next
+        A body whose bulk matrix holds a weight that changed is factorised again at the next
         Newton step, and kept while the weights stay the same (collective).
         """
         for body in self.bodies.values():
-            constants = body.forms.rates
-            if body.forms.storage is not None and tuple(float(c.value) for c in constants) != rates:
-                for c, value in zip(constants, rates, strict=True):
-                    c.value = value
-                body.bulk_changed()
+            _assign(body, zip(body.forms.rates, rates, strict=True))
 
     def set_time(self, time: float) -> None:
-        """Data that follow a ``Schedule`` or a function ``(x, t)`` take their value at ``time``."""
+        """Data that follow a ``Schedule`` or a function ``(x, t)`` take their value at ``time``.
+
+        A body whose bulk matrix holds one that changed (a switched convection coefficient)
+        is factorised again at the next Newton step.
+        """
         for body in self.bodies.values():
-            changed = []
-            if body.forms.time is not None and float(body.forms.time.value) != time:
-                body.forms.time.value = time
-                changed.append(body.forms.time)
-            for coefficient, schedule in body.forms.timed:
-                if float(coefficient.value) != schedule.at(time):
-                    coefficient.value = schedule.at(time)
-                    changed.append(coefficient)
-            for data, expression in body.forms.moving:
-                data.interpolate(expression)
-            if any(c in body.matrix_constants for c in changed):
-                body.bulk_changed()  # e.g. a convection coefficient that switched
+            pairs = [(c, schedule.at(time)) for c, schedule in body.forms.timed]
+            if body.forms.time is not None:
+                pairs.append((body.forms.time, time))
+            if _assign(body, pairs) and body.forms.time is not None:
+                for data, expression in body.forms.moving:  # Dirichlet data of (x, t)
+                    data.interpolate(expression)
 
     def breakpoints(self) -> list[float]:
         """Every time [s] listed by a ``Schedule`` of the problem's conditions (collective)."""

@@ -276,7 +276,7 @@ class Stepper:
                         f"is below min_step = {min_step:.3g} s: {str(failure).splitlines()[0]}. "
                         "Try a smaller min_step, line_search='bt', or a slower ramp of the loads"
                     ) from failure
-                self.next_step = length = trial / 2
+                length = trial / 2
                 continue
             if tolerance is not None:
                 error = self.error_estimate()
@@ -285,12 +285,12 @@ class Stepper:
                     if error > tolerance and trial > min_step:
                         self.undo()
                         self.rejected += 1
-                        self.next_step = length = max(min_step, trial * min(0.9, max(0.2, factor)))
+                        length = max(min_step, trial * min(0.9, max(0.2, factor)))
                         continue
                     length = trial * min(2.0, max(0.2, factor))
             else:
                 length = min(step, 2 * length)  # back to the step after a halving
-            self.next_step = length
+            self.next_step = length  # saved with the clock: a restart goes on with it
             if after_step is not None and after_step(self, result):
                 return
 
