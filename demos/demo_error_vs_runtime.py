@@ -6,6 +6,8 @@
 # time and the error against the best available reference:
 #
 # * **monolithic MUMPS** (one direct solve of the merged system) and **monolithic CG + GAMG**;
+#   under `mpiexec`, PETSc's **BDDC** with deluxe scaling on the unassembled system (one
+#   subdomain per rank, the master layers its interface);
 # * the **subdomain iteration** with each corrector (exact, method 1, method 2, partial
 #   condensation) and **interface CG** preconditioned by partial condensation;
 # * the **partitioned couplings** a preCICE user would pick: Dirichlet–Neumann and
@@ -262,6 +264,15 @@ def thermal_methods(name: str, make_scene, make_problem) -> None:
     run(name, dofs, "monolithic CG+GAMG", monolithic(sc.CG_GAMG))
 
     problem = make_problem(make_scene(placement))
+    if comm.size > 1 and bodies >= comm.size:  # whole bodies on every rank
+
+        def bddc(trace):
+            solver = sc.Monolithic(sc.BDDC)
+            inner = linear(problem, solver, trace)
+            solver.destroy()
+            return f"{inner.rounds} Krylov iterations"
+
+        run(name, dofs, "monolithic BDDC deluxe", bddc)
 
     def subdomain(corrector, krylov):
         def solve(trace):

@@ -194,7 +194,7 @@ case("floating scene: no temperature anywhere", 0.0, nothing_holds_the_plates)
 
 def partitioned(couple, h: float):
     """The top-cooled plates, Aitken-accelerated coupling vs the subdomain solve."""
-    scene = two_plates_scene(n, n)
+    scene = two_plates_scene(n, n, placement="shared")  # a coupling needs both on every rank
     problem = sc.Problem(
         scene,
         {"plate_A": sc.Material(conductivity=1.0), "plate_B": sc.Material(conductivity=1.0)},

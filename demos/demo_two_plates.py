@@ -105,7 +105,7 @@ for n, layers in enumerate([2, 4, 8, 16][: 2 if args.small else 4]):
 # solve, and the wall time (set-up of the corrector and iteration).
 
 layers = 4 if args.small else 8
-scene = two_plates_scene(layers, layers)
+scene = two_plates_scene(layers, layers, placement="shared")  # the partitioned couplings too
 exponents = range(-8, 13, 4) if args.small else range(-8, 13)
 correctors = [
     sc.Method1(),

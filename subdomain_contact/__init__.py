@@ -19,7 +19,7 @@ from subdomain_contact.correctors import Exact, Method1, Method2, PartialCondens
 from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
-from subdomain_contact.monolithic import CG_GAMG, Monolithic
+from subdomain_contact.monolithic import BDDC, CG_GAMG, Monolithic
 from subdomain_contact.newton import NewtonConvergenceError, NewtonStep, Result, solve
 from subdomain_contact.physics import (
     Contact,
@@ -58,6 +58,7 @@ from subdomain_contact.system import System
 from subdomain_contact.transient import StepFailedError, Stepper
 
 __all__ = [
+    "BDDC",
     "CG_GAMG",
     "DIRECT",
     "Contact",

@@ -5,6 +5,10 @@ between a body and a master layer, ``P_kᵀ C^α_k`` back, and ``Σ_α P_kᵀ D^
 master layer. It is the same discrete system as the subdomain iteration, with the master
 layers merged, so Newton with either linear solver follows the same path. Masters of an
 insulating contact have no equation: they are held at 0.
+
+The merged matrix is assembled (AIJ) for MUMPS or an iterative solve, or left unassembled
+(PETSc's MATIS, one subdomain per rank: its bodies and the masters they touch) for PETSc's
+balancing domain decomposition, PCBDDC, whose interface is then the master layers.
 """
 
 from __future__ import annotations
@@ -15,14 +19,14 @@ from types import MappingProxyType
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.body import Body
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
 
-__all__ = ["CG_GAMG", "Monolithic"]
+__all__ = ["BDDC", "CG_GAMG", "Monolithic"]
 
 Vector = npt.NDArray[np.float64]
 
@@ -30,6 +34,24 @@ Vector = npt.NDArray[np.float64]
 #: GAMG), to a relative residual of 1e-12: the monolithic iterative solve.
 CG_GAMG: Mapping[str, str] = MappingProxyType(
     {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-12", "ksp_max_it": "5000"}
+)
+
+#: PETSc's balancing domain decomposition by constraints on the unassembled matrix (one
+#: subdomain per rank, the master layers its interface), deluxe scaling, MUMPS for the local
+#: and coarse problems; GMRES to a relative residual of 1e-12 (``ksp_type cg`` for a
+#: symmetric problem). Every rank must hold whole bodies (``placement="groups"`` with no
+#: more ranks than bodies).
+BDDC: Mapping[str, str] = MappingProxyType(
+    {
+        "ksp_type": "gmres",
+        "ksp_rtol": "1e-12",
+        "ksp_max_it": "1000",
+        "pc_type": "bddc",
+        "pc_bddc_use_deluxe_scaling": "true",
+        "pc_bddc_dirichlet_pc_factor_mat_solver_type": "mumps",
+        "pc_bddc_neumann_pc_factor_mat_solver_type": "mumps",
+        "pc_bddc_coarse_pc_factor_mat_solver_type": "mumps",
+    }
 )
 
 
@@ -62,36 +84,29 @@ class Monolithic:
         #: Set-ups of the merged matrix's solve: factorisations, for a direct one.
         self.factorisations = 0
 
+    def _bddc(self) -> bool:
+        """Whether the solve is PCBDDC (given in ``options`` or on the command line)."""
+        database, key = PETSc.Options(), self.prefix + "pc_type"
+        given = database.getString(key) if database.hasName(key) else self.options.get("pc_type")
+        return given == "bddc"
+
     def check(self, system: System) -> None:
-        """Refuse a system this solver cannot solve (bodies on different rank groups)."""
-        if not system.problem.scene.shared:
+        """Refuse BDDC on a rank that holds part of a body (the merged matrix takes any)."""
+        if self._bddc() and system.comm.allreduce(
+            system.problem.scene.group_comm.size > 1, op=MPI.LOR
+        ):
             raise ValueError(
-                f"{system.problem.scene.source}: the monolithic solve needs every body on the "
-                "same ranks: load the scene with placement='shared' (or run on one rank)"
+                f"{system.problem.scene.source}: BDDC needs every body on one rank: load the "
+                "scene with placement='groups' on no more ranks than bodies"
             )
 
     def setup(self, system: System) -> None:
-        """Merge the assembled blocks into one AIJ matrix and factorise it."""
+        """Merge the assembled blocks into one matrix and set its solve up (factorise it)."""
         self.check(system)
         self.system = system
-        names, interfaces = list(system.bodies), list(system.sizes)
-        n = len(names) + len(interfaces)
-        blocks: list[list[PETSc.Mat | None]] = [[None] * n for _ in range(n)]
-        made: list[PETSc.Mat] = []
-        for a, name in enumerate(names):
-            body = system.bodies[name]
-            blocks[a][a] = body.whole_matrix()
-            for m, k in enumerate(interfaces, start=len(names)):
-                if k in body.layers:
-                    B, C = _coupling(body, k, system)
-                    blocks[a][m], blocks[m][a] = B, C
-                    made += [B, C]
-        for m, k in enumerate(interfaces, start=len(names)):
-            blocks[m][m] = _master_block(system, k)
-            made.append(blocks[m][m])
-        nest = PETSc.Mat().createNest(blocks, comm=system.comm)
-        merged = nest.convert("aij", out=PETSc.Mat())
-        destroy(nest, *made)
+        if self._bddc():  # a new preconditioner for every new matrix
+            self.destroy()
+        merged = _unassembled(system) if self._bddc() else _merged(system)
         if self.K is not None and merged.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
             # the same sparsity (a new Newton step): MUMPS keeps its analysis
             merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
@@ -102,7 +117,10 @@ class Monolithic:
             return
         self.destroy()
         self.K = merged
-        self.ksp = make_ksp(self.K, self.prefix, self.options)
+        options = dict(self.options)
+        if self._bddc() and system.symmetric and "ksp_type" not in self.options:
+            options["ksp_type"] = "cg"
+        self.ksp = make_ksp(self.K, self.prefix, options)
         self.factorisations += 1
         if self.monitor is not None:
 
@@ -145,65 +163,132 @@ class Monolithic:
         self.K, self.ksp = None, None
 
 
-def _coupling(body: Body, k: str, system: System) -> tuple[PETSc.Mat, PETSc.Mat]:
-    """``B_k P_k`` (body rows × masters of k) and ``P_kᵀ C_k`` (masters × body columns).
+class _Layout:
+    """Global indices of the system's unknowns (the global-vector layout), on every rank."""
 
-    Every stored entry is inserted, zeros included, so that the merged matrix keeps one
-    sparsity pattern from one Newton step to the next.
+    def __init__(self, system: System) -> None:
+        comm = system.comm
+        offsets = np.cumsum([0, *comm.allgather(system.local_size)])
+        self.size, self.mine = int(offsets[-1]), int(offsets[comm.rank])
+        first = int(offsets[0]) + comm.bcast(system.master_slice.start, root=0)
+        ends = np.cumsum([0, *system.sizes.values()])
+        #: interface -> global index of its first master
+        self.master_at = {k: first + int(e) for k, e in zip(system.sizes, ends[:-1], strict=True)}
+        self._shifts = {}
+        for name, body in system.bodies.items():
+            ranges = np.asarray(body.A_bulk.getOwnershipRanges())
+            shift = self.mine + system.slices[name].start - body.start
+            self._shifts[name] = ranges, np.array(body.comm.allgather(shift))
+
+    def body(self, name: str, g: npt.NDArray) -> npt.NDArray:
+        """Global indices of a body's DOFs ``g`` (numbered on the body's communicator)."""
+        ranges, shifts = self._shifts[name]
+        return g + shifts[np.searchsorted(ranges, g, side="right") - 1]
+
+
+Entries = tuple[npt.NDArray, npt.NDArray, npt.NDArray]  # rows, columns, values
+
+
+def _body_entries(
+    system: System, layout: _Layout, name: str
+) -> tuple[list[Entries], list[Entries]]:
+    """A body's entries of the merged matrix, global indices, zeros included.
+
+    Returns its rows on this rank (``A``, and ``B_k P_k`` to the masters), and its share of
+    the master rows (``P_kᵀ C_k``, and ``P_kᵀ D_k P_k`` on the active masters; identity
+    halves on an insulating channel's), given by the body's first rank only.
     """
-    m = system.sizes[k]
-    local_m = m if system.comm.rank == 0 else 0
-    blocks = body.blocks[k]
-    free = np.setdiff1d(np.arange(body.kept_slice.start, body.kept_slice.stop), body.fixed_kept)
-    B = _from_sparse(  # the rows of fixed DOFs are their conditions alone
-        [(blocks["BP"][free], body.kept[free], np.arange(m))], (body.size, local_m), system
-    )
-    rows = np.arange(m) if system.comm.rank == 0 else np.zeros(0, dtype=int)
-    parts = [(-blocks["L"][body.position[k][rows]], rows, body.kept)]
-    if "CtP" in blocks:
-        parts.append((blocks["CtP"][rows], rows, body.kept))
-    return B, _from_sparse(parts, (local_m, body.size), system)
+    body = system.bodies[name]
+    indptr, indices, data = body.whole_matrix().getValuesCSR()
+    first_row = layout.mine + system.slices[name].start
+    rows = [(first_row + np.repeat(np.arange(body.size), np.diff(indptr)),
+             layout.body(name, indices), data)]  # fmt: skip
+    masters = []
+    kept = layout.body(name, body.kept)
+    for k in body.layers:
+        blocks, at = body.blocks[k], layout.master_at[k]
+        owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
+        free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
+        B = blocks["BP"][free].tocoo()
+        rows.append((kept[free][B.row], at + B.col, B.data))
+        if body.comm.rank == 0:
+            C = -blocks["L"][body.position[k]]
+            if "CtP" in blocks:
+                C = C + blocks["CtP"]
+            C = C.tocoo()
+            active = system.active[k]
+            D = np.where(np.outer(active, active), body.link_stiffness(k), 0.0)
+            D[~active, ~active] = 0.5
+            i, j = np.indices(D.shape)
+            masters.append((at + C.row, kept[C.col], C.data))
+            masters.append((at + i.ravel(), at + j.ravel(), D.ravel()))
+    return rows, masters
 
 
-def _master_block(system: System, k: str) -> PETSc.Mat:
-    """``Σ_α P_kᵀ D^α_k P_k``, identity on the masters of an insulating channel (dense)."""
-    local = np.zeros((system.sizes[k],) * 2)
-    for body in system.bodies_of(k):
-        local += body.link_stiffness(k)
-    D = system.total({k: local})[k]
-    inactive = ~system.active[k]
-    D[inactive, :] = 0.0
-    D[:, inactive] = 0.0
-    D[inactive, inactive] = 1.0
-    m = system.sizes[k]
-    local_m = m if system.comm.rank == 0 else 0
-    rows = np.arange(m) if system.comm.rank == 0 else np.zeros(0, dtype=int)
-    dense = scipy.sparse.csr_matrix(np.ones((len(rows), m)))
-    dense.data[:] = D[rows].ravel()  # every entry stored, zeros included
-    return _from_sparse([(dense, rows, np.arange(m))], (local_m, local_m), system)
+def _concatenate(parts: list[Entries]) -> Entries:
+    """One (rows, columns, values) triple of many."""
+    if not parts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+    r, c, v = (np.concatenate([part[i] for part in parts]) for i in range(3))
+    return r, c, v
 
 
-def _from_sparse(
-    parts: list[tuple[scipy.sparse.csr_matrix, npt.NDArray, npt.NDArray]],
-    local: tuple[int, int],
-    system: System,
-) -> PETSc.Mat:
-    """A PETSc AIJ matrix of local size ``local``: the sum of this rank's ``parts``.
+def _merged(system: System) -> PETSc.Mat:
+    """The whole Jacobian as one AIJ matrix on the system's communicator.
 
-    Each part is ``(rows_csr, rows, columns)``: row i of ``rows_csr`` is global row
-    ``rows[i]``, its column j global column ``columns[j]``. Every stored entry is added,
-    zeros included.
+    Rows and columns follow the global-vector layout, for bodies spread over every rank or
+    held by rank groups alike. Each rank writes its bodies' rows; the master rows, summed over
+    the bodies, go to rank 0. Every stored entry is kept, zeros included, so that the matrix
+    keeps one sparsity pattern from one Newton step to the next.
     """
-    M = PETSc.Mat().createAIJ(
-        ((local[0], PETSc.DETERMINE), (local[1], PETSc.DETERMINE)), comm=system.comm
+    comm, layout = system.comm, _Layout(system)
+    rows, masters = [], []
+    for name in system.bodies:
+        body_rows, body_masters = _body_entries(system, layout, name)
+        rows += body_rows
+        masters += body_masters
+    gathered = comm.gather(masters, root=0)
+    if comm.rank == 0:
+        rows += [part for parts in gathered for part in parts]
+    r, c, v = _concatenate(rows)
+    csr = scipy.sparse.coo_matrix(
+        (v, (r - layout.mine, c)), shape=(system.local_size, layout.size)
+    ).tocsr()  # duplicates summed, explicit zeros kept
+    csr.sort_indices()
+    n = (system.local_size, PETSc.DETERMINE)
+    return PETSc.Mat().createAIJ(
+        size=(n, n),
+        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
+        comm=comm,
     )
-    widest = max((int(np.diff(csr.indptr).max(initial=0)) for csr, _, _ in parts), default=0)
-    M.setPreallocationNNZ((widest * len(parts), widest * len(parts)))
-    M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    for csr, rows, columns in parts:
-        for i, row in enumerate(rows):
-            span = slice(csr.indptr[i], csr.indptr[i + 1])
-            at = columns[csr.indices[span]].astype(PETSc.IntType)
-            M.setValues([int(row)], at, csr.data[span], addv=PETSc.InsertMode.ADD_VALUES)
-    M.assemble()
-    return M
+
+
+def _unassembled(system: System) -> PETSc.Mat:
+    """The whole Jacobian left unassembled (MATIS): each rank its bodies and their masters.
+
+    The local matrix holds the bodies' rows and their shares of the master rows; PETSc sums
+    the shares of a master layer between two ranks, which is the merged matrix.
+    """
+    comm, layout = system.comm, _Layout(system)
+    parts = []
+    for name in system.bodies:
+        rows, masters = _body_entries(system, layout, name)
+        parts += rows + masters
+    r, c, v = _concatenate(parts)
+    local = np.unique(np.concatenate([r, c]))
+    csr = scipy.sparse.coo_matrix(
+        (v, (np.searchsorted(local, r), np.searchsorted(local, c))), shape=(local.size,) * 2
+    ).tocsr()
+    csr.sort_indices()
+    block = PETSc.Mat().createAIJ(
+        size=csr.shape,
+        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
+        comm=MPI.COMM_SELF,
+    )
+    lgmap = PETSc.LGMap().create(local.astype(PETSc.IntType), comm=comm)
+    n = (system.local_size, PETSc.DETERMINE)
+    K = PETSc.Mat().createIS((n, n), lgmapr=lgmap, lgmapc=lgmap, comm=comm)
+    K.setISLocalMat(block)
+    K.assemble()
+    destroy(block, lgmap)
+    return K

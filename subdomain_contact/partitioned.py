@@ -219,14 +219,14 @@ def _sides(problem: Problem, acceleration: str, coupling: str, *, neumann: bool)
     first body has none when it takes a Neumann datum.
     """
     scene = problem.scene
-    if (
-        len(scene.bodies) != 2
-        or len(scene.interfaces) != 1
-        or not scene.shared
-        or problem.fields != ("temperature",)
-    ):
+    if len(scene.bodies) != 2 or len(scene.interfaces) != 1 or problem.fields != ("temperature",):
         raise ValueError(
             f"{scene.source}: {coupling} coupling needs two bodies, one interface, heat alone"
+        )
+    if not scene.shared:
+        raise ValueError(
+            f"{scene.source}: {coupling} coupling needs both bodies on the same ranks: load the "
+            "scene with placement='shared' (under mpiexec the default puts them on rank groups)"
         )
     if acceleration not in ACCELERATIONS:
         raise ValueError(f"acceleration = {acceleration!r}: one of {ACCELERATIONS}")

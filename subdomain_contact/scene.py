@@ -149,7 +149,7 @@ def load_scene(
     interfaces: Sequence[str],
     parameters: Mapping[str, float] | None = None,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "shared",
+    placement: str = "auto",
 ) -> Scene:
     """Mesh a ``.geo`` file and split it into bodies and master layers.
 
@@ -163,7 +163,8 @@ def load_scene(
             ``"groups"``: ranks split into groups, each body solved by one group (one body
             per group when there are enough ranks, in proportion to their cells; several
             bodies per rank otherwise). Every rank meshes the file and keeps the master
-            layers; a group distributes only its own bodies.
+            layers; a group distributes only its own bodies. ``"auto"`` (default):
+            ``"groups"`` with several bodies on several ranks, else ``"shared"``.
 
     Raises:
         ValueError: Unknown parameter, missing or overlapping group, empty or
@@ -171,6 +172,8 @@ def load_scene(
             them, or a file gmsh cannot mesh; the message names the file and the group.
     """
     path = Path(path)
+    if placement == "auto":
+        placement = "groups" if len(bodies) > 1 else "shared"
     if placement == "groups" and comm.size > 1:
         return _grouped(
             load_scene(
@@ -183,7 +186,7 @@ def load_scene(
             comm,
         )
     if placement not in ("shared", "groups"):
-        raise ValueError(f"placement = {placement!r}: use 'shared' or 'groups'")
+        raise ValueError(f"placement = {placement!r}: use 'auto', 'shared' or 'groups'")
     data = _mesh_geo(path, dict(parameters or {}), comm)
     parent, groups = data.mesh, data.physical_groups
     tdim = parent.topology.dim

@@ -29,9 +29,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.correctors import Corrector, Exact
+from subdomain_contact.correctors import Corrector, Exact, PartialCondensation
 from subdomain_contact.system import System
 
 __all__ = [
@@ -94,14 +95,24 @@ class SubdomainConvergenceError(RuntimeError):
         self.result = result
 
 
+#: Element layers of the partial condensation that preconditions the interface Krylov by
+#: default where a body is spread over several ranks (see :class:`Subdomains`).
+SPREAD_LAYERS = 2
+
+
 class Subdomains:
     """The subdomain iteration as the linear solver of a system (``setup`` / ``solve``).
 
     Args:
-        corrector: How the masters are corrected (default: the exact corrector).
+        corrector: How the masters are corrected. Default: the exact corrector; where a body
+            spread over several ranks has more master DOFs than ``dense_limit`` (its exact
+            part would cost one body solve per master DOF), partial condensation on
+            :data:`SPREAD_LAYERS` element layers as the preconditioner of the interface
+            Krylov, which applies that body's ``S^α`` by one body solve per iteration.
         krylov: ``True``: GMRES (CG for a symmetric problem) on every interface at once;
             ``False``: the paper's fixed point; ``None``: Krylov where some body touches
-            several interfaces or floats, else the fixed point.
+            several interfaces, floats, or is spread with many master DOFs (above), else
+            the fixed point.
         coarse: Add the coarse correction to the Krylov preconditioner.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body on one rank forms it from its Schur
@@ -128,7 +139,7 @@ class Subdomains:
         prefix: str = "sc_interface_",
         monitor: Monitor | None = None,
     ) -> None:
-        self.corrector = corrector or Exact()
+        self.given, self.corrector = corrector, corrector or Exact()
         self.krylov, self.coarse, self.dense_limit = krylov, coarse, dense_limit
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
@@ -144,9 +155,14 @@ class Subdomains:
         for body in system.bodies.values():
             body.factorise()
         scene = system.problem.scene
+        costly = system.comm.allreduce(
+            any(not (b.schur or self._dense(b)) for b in system.bodies.values()), op=MPI.LOR
+        )
+        if self.given is None:
+            self.corrector = PartialCondensation(layers=SPREAD_LAYERS) if costly else Exact()
         if self.krylov is None:
             several = any(len(scene.interfaces_of(b)) > 1 for b in scene.bodies)
-            self.use_krylov = several or any(system.floating.values())
+            self.use_krylov = several or any(system.floating.values()) or costly
         else:
             self.use_krylov = bool(self.krylov)
         parts = system.everywhere(

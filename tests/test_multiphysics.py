@@ -51,12 +51,18 @@ LINEAR = {"subdomain": sc.Subdomains, "monolithic": sc.Monolithic}
 
 
 def contact_displacements(system, comm):
-    """Body name -> mean u_x [m] of its nodes on the contact plane x = 0.5 (global)."""
+    """Body name -> mean u_x [m] of its nodes on the contact plane x = 0.5 (global).
+
+    Each body from the ranks that hold it (every rank, or its rank group).
+    """
     ux = {}
-    for name, body in system.bodies.items():
-        points, values = body.nodal("displacement", 0)
-        on = np.isclose(points[:, 0], 0.5)
-        total = comm.allreduce(np.array([values[on].sum(), on.sum()]), op=MPI.SUM)
+    for name in system.problem.scene.bodies:
+        local = np.zeros(2)
+        if name in system.bodies:
+            points, values = system.bodies[name].nodal("displacement", 0)
+            on = np.isclose(points[:, 0], 0.5)
+            local = np.array([values[on].sum(), on.sum()])
+        total = comm.allreduce(local, op=MPI.SUM)
         ux[name] = total[0] / total[1]
     return ux
 

@@ -77,7 +77,9 @@ def test_distributed_equals_serial(comm, corrector):
     results = {}
     for label, c in [("world", comm), ("self", MPI.COMM_SELF)]:
         k_b = 7.0 if corrector.name == "exact" else 1.0  # β = ½ suits identical plates
-        case = two_plates(two_plates_scene(6, 5, comm=c), h=h, k_b=k_b, source_a=4.0)
+        case = two_plates(
+            two_plates_scene(6, 5, comm=c, placement="shared"), h=h, k_b=k_b, source_a=4.0
+        )
         results[label] = linear_solve(case.problem, corrector, rtol=1e-12, krylov=False)
     (world, r_world), (serial, r_serial) = results["world"], results["self"]
     # the same iteration with the bodies' sums in another order: round-off only (measured

@@ -10,8 +10,14 @@ from subdomain_contact.partitioned import (
     solve_dirichlet_neumann,
     solve_robin_robin,
 )
-from verification.cases import two_plates
+from verification.cases import two_plates, two_plates_scene
 from verification.nodal import relative_nodal_error
+
+
+@pytest.fixture(scope="module")
+def plates(comm):
+    """conftest's plates spread over every rank: a coupling needs both bodies on each."""
+    return two_plates_scene(4, 4, comm=comm, placement="shared")
 
 
 def error(result, reference):
@@ -117,9 +123,7 @@ def test_dirichlet_neumann_stays_exact_at_a_stiff_contact_where_robin_robin_is_r
 
 
 def test_a_diverging_coupling_stops_and_says_so():
-    from verification.cases import two_plates_scene
-
-    scene = two_plates_scene(4, 4)
+    scene = two_plates_scene(4, 4, placement="shared")
     problem = two_plates(scene, h=1e3, k_b=10.0).problem  # DN unrelaxed-ish: B stiffer than A
     result = solve_dirichlet_neumann(problem, acceleration="constant", relaxation=1.0)
     # the iteration matrix has eigenvalues near −k_B/k_A = −10: it grows 10-fold a step, so

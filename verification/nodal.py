@@ -28,10 +28,10 @@ def relative_nodal_error(
         values: Body name -> owned nodal values.
         reference: Body name -> exact function of the node coordinates ``(n, 3)``, or
             owned nodal values of a reference solution.
-        comm: Where to reduce (default: the first body's mesh communicator; give the
-            scene's when bodies live on different rank groups).
+        comm: Where to reduce (default: every rank, which covers bodies on rank groups;
+            a max and a min reduce the same on ranks that each hold a serial copy).
     """
-    comm = comm or next(iter(spaces.values())).mesh.comm
+    comm = comm or MPI.COMM_WORLD
     worst, low, high = 0.0, np.inf, -np.inf
     for name, V in spaces.items():
         n = V.dofmap.index_map.size_local
