@@ -274,18 +274,30 @@ def _unassembled(system: System) -> PETSc.Mat:
     for name in system.bodies:
         rows, masters = _body_entries(system, layout, name)
         parts += rows + masters
+    # local unknowns: ranges of global indices (each body's, each touched layer's masters),
+    # numbered in increasing global order
+    ranges = [(layout.mine + system.slices[name].start, body.size)
+              for name, body in system.bodies.items()]  # fmt: skip
+    touched = {k for body in system.bodies.values() for k in body.layers}
+    ranges += [(layout.master_at[k], system.sizes[k]) for k in system.sizes if k in touched]
+    ranges.sort()
+    first = np.array([a for a, _ in ranges])
+    offset = first - np.cumsum([0, *(n for _, n in ranges)])[:-1]
+
+    def local(g: npt.NDArray) -> npt.NDArray:
+        return g - offset[np.searchsorted(first, g, side="right") - 1]
+
     r, c, v = _concatenate(parts)
-    local = np.unique(np.concatenate([r, c]))
-    csr = scipy.sparse.coo_matrix(
-        (v, (np.searchsorted(local, r), np.searchsorted(local, c))), shape=(local.size,) * 2
-    ).tocsr()
+    size = sum(n for _, n in ranges)
+    csr = scipy.sparse.coo_matrix((v, (local(r), local(c))), shape=(size, size)).tocsr()
     csr.sort_indices()
     block = PETSc.Mat().createAIJ(
         size=csr.shape,
         csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
         comm=MPI.COMM_SELF,
     )
-    lgmap = PETSc.LGMap().create(local.astype(PETSc.IntType), comm=comm)
+    numbers = np.concatenate([np.arange(a, a + n) for a, n in ranges]) if ranges else []
+    lgmap = PETSc.LGMap().create(np.asarray(numbers, dtype=PETSc.IntType), comm=comm)
     n = (system.local_size, PETSc.DETERMINE)
     K = PETSc.Mat().createIS((n, n), lgmapr=lgmap, lgmapc=lgmap, comm=comm)
     K.setISLocalMat(block)
