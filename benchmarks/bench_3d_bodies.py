@@ -65,7 +65,7 @@ if comm.rank == 0:
 for size in args.sizes:
     monolithic = sc.Monolithic()
     mono, mono_seconds, dofs, reference = newton(
-        blocks_row_scene(args.count, size, comm=comm), monolithic
+        blocks_row_scene(args.count, size, comm=comm, placement="shared"), monolithic
     )
     monolithic.destroy()
     scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)

@@ -69,7 +69,8 @@ if comm.rank == 0:
 for layers in args.sizes or sizes:
     rows = max(2, layers // aspect)
     monolithic = sc.Monolithic()
-    mono, mono_seconds, dofs, p_mono = newton(cases.bars_scene(layers, rows, comm=comm), monolithic)
+    mono_scene = cases.bars_scene(layers, rows, comm=comm, placement="shared")
+    mono, mono_seconds, dofs, p_mono = newton(mono_scene, monolithic)
     monolithic.destroy()
     scene = cases.bars_scene(layers, rows, comm=comm, placement=placement)
     sub, sub_seconds, _, p_sub = newton(scene, sc.Subdomains())

@@ -99,7 +99,7 @@ if comm.rank == 0:
 for layers in args.sizes or sizes:
     rows = max(2, layers // aspect)
     monolithic = sc.Monolithic()
-    mono = run(cases.bars_scene(layers, rows, comm=comm), monolithic)
+    mono = run(cases.bars_scene(layers, rows, comm=comm, placement="shared"), monolithic)
     dofs = mono[0].num_dofs()
     mono_values = gathered(mono[0])
     mono[0].destroy()
