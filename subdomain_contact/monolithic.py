@@ -104,9 +104,10 @@ class Monolithic:
         """Merge the assembled blocks into one matrix and set its solve up (factorise it)."""
         self.check(system)
         self.system = system
-        if self._bddc():  # a new preconditioner for every new matrix
+        bddc = self._bddc()
+        if bddc:  # a new preconditioner for every new matrix
             self.destroy()
-        merged = _unassembled(system) if self._bddc() else _merged(system)
+        merged = _unassembled(system) if bddc else _merged(system)
         if self.K is not None and merged.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
             # the same sparsity (a new Newton step): MUMPS keeps its analysis
             merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
@@ -202,10 +203,10 @@ def _body_entries(
              layout.body(name, indices), data)]  # fmt: skip
     masters = []
     kept = layout.body(name, body.kept)
+    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
+    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
     for k in body.layers:
         blocks, at = body.blocks[k], layout.master_at[k]
-        owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
-        free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
         B = blocks["BP"][free].tocoo()
         rows.append((kept[free][B.row], at + B.col, B.data))
         if body.comm.rank == 0:
@@ -230,6 +231,22 @@ def _concatenate(parts: list[Entries]) -> Entries:
     return r, c, v
 
 
+def _aij(
+    rows: npt.NDArray, columns: npt.NDArray, values: npt.NDArray, shape, size, comm
+) -> PETSc.Mat:
+    """An AIJ matrix of ``size`` from this rank's entries (local rows, global columns).
+
+    Duplicates are summed; explicit zeros are kept.
+    """
+    csr = scipy.sparse.coo_matrix((values, (rows, columns)), shape=shape).tocsr()
+    csr.sort_indices()
+    return PETSc.Mat().createAIJ(
+        size=size,
+        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
+        comm=comm,
+    )
+
+
 def _merged(system: System) -> PETSc.Mat:
     """The whole Jacobian as one AIJ matrix on the system's communicator.
 
@@ -248,16 +265,8 @@ def _merged(system: System) -> PETSc.Mat:
     if comm.rank == 0:
         rows += [part for parts in gathered for part in parts]
     r, c, v = _concatenate(rows)
-    csr = scipy.sparse.coo_matrix(
-        (v, (r - layout.mine, c)), shape=(system.local_size, layout.size)
-    ).tocsr()  # duplicates summed, explicit zeros kept
-    csr.sort_indices()
     n = (system.local_size, PETSc.DETERMINE)
-    return PETSc.Mat().createAIJ(
-        size=(n, n),
-        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
-        comm=comm,
-    )
+    return _aij(r - layout.mine, c, v, (system.local_size, layout.size), (n, n), comm)
 
 
 def _unassembled(system: System) -> PETSc.Mat:
@@ -286,13 +295,7 @@ def _unassembled(system: System) -> PETSc.Mat:
 
     r, c, v = _concatenate(parts)
     size = sum(n for _, n in ranges)
-    csr = scipy.sparse.coo_matrix((v, (local(r), local(c))), shape=(size, size)).tocsr()
-    csr.sort_indices()
-    block = PETSc.Mat().createAIJ(
-        size=csr.shape,
-        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
-        comm=MPI.COMM_SELF,
-    )
+    block = _aij(local(r), local(c), v, (size, size), (size, size), MPI.COMM_SELF)
     numbers = np.concatenate([np.arange(a, a + n) for a, n in ranges]) if ranges else []
     lgmap = PETSc.LGMap().create(np.asarray(numbers, dtype=PETSc.IntType), comm=comm)
     n = (system.local_size, PETSc.DETERMINE)
