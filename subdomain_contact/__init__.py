@@ -15,7 +15,14 @@ Import ``dolfinx_solver`` before this package (this module does it).
 import dolfinx_solver  # noqa: F401  (must precede dolfinx and petsc4py)
 
 from subdomain_contact import laws
-from subdomain_contact.correctors import Exact, Method1, Method2, PartialCondensation, paper_factor
+from subdomain_contact.correctors import (
+    Exact,
+    Method1,
+    Method2,
+    PartialCondensation,
+    StripExact,
+    paper_factor,
+)
 from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
@@ -86,6 +93,7 @@ __all__ = [
     "Schedule",
     "StepFailedError",
     "Stepper",
+    "StripExact",
     "SubdomainConvergenceError",
     "Subdomains",
     "System",

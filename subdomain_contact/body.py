@@ -25,9 +25,16 @@ replace that block by ``Σ + L``, the interface operator of the body is dense al
 a change of the contact laws alone (a Newton step whose bulk is linear) costs a new dense block,
 never a new sparse factorisation. A body spread over several ranks is factorised whole
 (MUMPS, distributed) and gets its interface operator from solves, a block of columns at a time.
+A body solved *iteratively* (a large 3D body, where a sparse factorisation grows far faster
+than the mesh) solves ``A`` by CG (GMRES where ``A`` is not symmetric) preconditioned by
+smoothed-aggregation AMG (PETSc's GAMG) with its kernel modes as the near-null space; its
+interface operator is only ever applied, one solve per application.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -40,12 +47,26 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave_map
+from subdomain_contact.modes import modes
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp
 
-__all__ = ["Body"]
+__all__ = ["ITERATIVE", "Body"]
+
+#: A body solved iteratively: CG (``ksp_type`` becomes GMRES for a body whose matrix is not
+#: symmetric) preconditioned by PETSc's smoothed-aggregation AMG, to the relative
+#: (preconditioned) residual that the interface solver sets (:meth:`Body.set_rtol`).
+ITERATIVE: Mapping[str, str] = MappingProxyType(
+    {
+        "ksp_type": "cg",
+        "pc_type": "gamg",
+        "pc_gamg_threshold": "0.02",
+        "ksp_rtol": "1e-12",
+        "ksp_max_it": "1000",
+    }
+)
 
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
@@ -68,6 +89,8 @@ class Body:
         prefix: PETSc options prefix of the body's factorisation (``<prefix>mat_mumps_*``).
         schur: Factorise with the contact DOFs left as a dense Schur block (a body on one
             rank only); otherwise the whole body matrix is factorised.
+        iterative: Solve the body by Krylov + AMG (:data:`ITERATIVE`, options under
+            ``prefix``) instead of a factorisation.
 
     Call :meth:`destroy` (collectively) when done.
     """
@@ -80,6 +103,7 @@ class Body:
         *,
         prefix: str,
         schur: bool = True,
+        iterative: bool = False,
     ) -> None:
         self.forms: BodyForms = body_forms(problem, body)
         self.name, self.U, W = body.name, self.forms.U, self.forms.W
@@ -96,9 +120,13 @@ class Body:
         self._index_contact_dofs(contact_dofs(self.forms, body.facet_tags, list(layers)))
         self._index_fields()
         self._compile()
-        self.schur = schur and self.comm.size == 1 and len(self.kept) > 0
+        self.iterative = iterative
+        self.schur = schur and not iterative and self.comm.size == 1 and len(self.kept) > 0
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None
+        self._near_null: list[PETSc.Object] = []
+        #: Krylov iterations of the body's iterative solves, summed.
+        self.solve_iterations = 0
         self._A: PETSc.Mat | None = None
         self._scaled: PETSc.Mat | None = None
         self.factorisations = 0
@@ -192,7 +220,8 @@ class Body:
             self.factor.destroy()
         mats = [m for forms in self.block_matrices.values() for m in forms.values()]
         destroy(self.ksp, self.A_bulk, self._A, self._scaled, self._kept_is, *mats, *self._vectors)
-        self.factor, self.ksp, self._A = None, None, None
+        destroy(*self._near_null)
+        self.factor, self.ksp, self._A, self._near_null = None, None, None, []
 
     # -- assembly and factorisation ------------------------------------------------------
     def assemble(self) -> None:
@@ -405,14 +434,58 @@ class Body:
         return rows, shares
 
     def _factorise_whole(self) -> None:
-        """``A`` as one sparse matrix, factorised by MUMPS (distributed)."""
+        """``A`` as one sparse matrix, factorised by MUMPS (distributed), or its AMG set up."""
         self.whole_matrix()
-        if self.ksp is None:
+        if self.ksp is None and self.iterative:
+            self._A.setNearNullSpace(self._near_null_space())
+            options = dict(ITERATIVE)
+            if not (self.is_linear and len(self.forms.fields) == 1):
+                options["ksp_type"] = "gmres"  # a Jacobian that is not symmetric
+            self.ksp = make_ksp(self._A, self.prefix, options)
+        elif self.ksp is None:
             self.ksp = make_ksp(self._A, self.prefix, DIRECT)
         else:
             self.ksp.setOperators(self._A)
             self.ksp.setUp()
         self.factorisations += 1
+
+    def _near_null_space(self) -> PETSc.NullSpace:
+        """The body's kernel modes on its DOFs, orthonormal (the near-null space of AMG)."""
+        fields, dim = self.forms.fields, self.forms.W.mesh.geometry.dim
+        V, _ = self.forms.collapsed(fields[0], 0 if fields[0] == "displacement" else None)
+        owned = V.dofmap.index_map.size_local
+        points = V.tabulate_dof_coordinates()[:owned]
+        total = self.comm.allreduce(np.array([*points.sum(axis=0), len(points)]), op=MPI.SUM)
+        centre = total[:3] / max(total[3], 1.0)
+        basis: list[PETSc.Vec] = []
+        for mode in modes(fields, dim):
+            v = self.A_bulk.createVecRight()
+            for name in fields:
+                for c in range(dim) if name == "displacement" else [None]:
+                    V, parent_of = self.forms.collapsed(name, c)
+                    owned = V.dofmap.index_map.size_local
+                    x = V.tabulate_dof_coordinates()[:owned] - centre
+                    v.array[parent_of[:owned]] = mode(name, c, x)
+            for q in basis:  # modified Gram-Schmidt
+                v.axpy(-v.dot(q), q)
+            norm = v.norm()
+            if norm > 0:
+                v.scale(1.0 / norm)
+                basis.append(v)
+            else:
+                v.destroy()
+        space = PETSc.NullSpace().create(vectors=basis, comm=self.comm)
+        self._near_null = [space, *basis]
+        return space
+
+    def set_rtol(self, rtol: float) -> None:
+        """Relative (preconditioned) residual of an iterative body solve.
+
+        The option ``-<prefix>ksp_rtol`` wins.
+        """
+        if self.iterative and self.ksp is not None:
+            if not PETSc.Options().hasName(self.prefix + "ksp_rtol"):
+                self.ksp.setTolerances(rtol=rtol)
 
     # -- solves -----------------------------------------------------------------------------
     def _gather_kept(self, values: Vector) -> Vector:
@@ -470,8 +543,16 @@ class Body:
         b, x = self._vectors[0], self._vectors[1]
         b.array[:] = rhs
         self.ksp.solve(b, x)
-        if self.ksp.getConvergedReason() < 0:
-            reason = self.ksp.getConvergedReason()
+        reason, iterations = self.ksp.getConvergedReason(), self.ksp.getIterationNumber()
+        self.solve_iterations += iterations if self.iterative else 0
+        if reason < 0 and self.iterative:
+            kind = f"{self.ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
+            raise RuntimeError(
+                f"body '{self.name}': {kind} stopped with PETSc reason {reason} after "
+                f"{iterations} iterations; solve it directly (-{self.prefix}solver direct, "
+                "or sc.System(problem, solver='direct'))"
+            )
+        if reason < 0:
             raise RuntimeError(f"body '{self.name}': linear solve failed (reason {reason})")
         return x.array.copy()
 
@@ -633,13 +714,16 @@ class Body:
         are condensed, the others clamped. Both dense, in master order.
         """
         forms, U = self.forms, self.forms.U
-        solid = forms.bulk
-        for j in self.layers:
-            if j != k:
+        others = [j for j in self.layers if j != k]
+        if others:
+            solid = forms.bulk
+            for j in others:
                 solid = solid + self._linearised[j]
-        a = dolfinx.fem.form(ufl.derivative(solid, U, ufl.TrialFunction(forms.W)))
-        K = dolfinx.fem.petsc.assemble_matrix(a, bcs=forms.bcs)
-        K.assemble()
+            a = dolfinx.fem.form(ufl.derivative(solid, U, ufl.TrialFunction(forms.W)))
+            K = dolfinx.fem.petsc.assemble_matrix(a, bcs=forms.bcs)
+            K.assemble()
+        else:  # the solid is the bulk, assembled already
+            K = self.bulk_matrix()
         Kt = K.transpose(PETSc.Mat())
         e, i = (
             PETSc.IS().createGeneral((self.start + d).astype(PETSc.IntType), comm=self.comm)
@@ -666,7 +750,8 @@ class Body:
             reordered = np.empty_like(matrix)
             reordered[np.ix_(order, order)] = matrix
             result.append(reordered)
-        destroy(K, Kt, e, i, K_ee, K_ie_sparse, K_ii, K_eiT, K_ie, ksp, X, eiT, dense)
+        destroy(K if others else None, Kt, e, i, K_ee, K_ie_sparse, K_ii, K_eiT, K_ie, ksp, X)
+        destroy(eiT, dense)
         return result[0], result[1]
 
     def clamp_fixed(self, k: str, stiffness: Matrix) -> Matrix:

@@ -6,7 +6,10 @@ The paper's correctors (eqs. 5–8) blend one correction per body with β:
 partial condensation on a strip of element layers scaled by X (eqs. 9–10). The exact corrector
 (METHOD.md §4) uses each body's whole interface response ``S^α`` (the series law
 ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` in the thermal case, the condensed Jacobian ``D − C A⁻¹ B`` for coupled
-fields), ``G = (S^A + S^B)⁻¹``: one correction for a linear interface at any h.
+fields), ``G = (S^A + S^B)⁻¹``: one correction for a linear interface at any h. The exact
+corrector on a strip replaces each body by the element layers along the contact, clamped
+beyond: the same law at a cost that does not grow with the body, the preconditioner of the
+interface Krylov where ``S^α`` is only applied (a body solved iteratively, or spread over ranks).
 
 Every part is a small dense matrix over the interface's master DOFs (all its channels),
 computed where the body lives; ``combine`` runs everywhere.
@@ -29,6 +32,7 @@ __all__ = [
     "Method1",
     "Method2",
     "PartialCondensation",
+    "StripExact",
     "paper_factor",
 ]
 
@@ -144,6 +148,37 @@ class Exact:
         self, interface: str, bodies: tuple[str, str], parts: tuple[Matrix, Matrix]
     ) -> Matrix:
         return _inverse(parts[0] + parts[1], f"S^A + S^B on '{interface}'")
+
+
+@dataclass(frozen=True, kw_only=True)
+class StripExact(Exact):
+    """The exact corrector with each body cut to ``layers`` element layers along the contact.
+
+    ``S̃^α = D − C (K̂ + L)⁻¹ B`` on the slaves of the interface, with K̂ the solid (its other
+    half-links included) condensed on them over the strip, clamped beyond it: the series law
+    ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` of the thermal case with a stiffer K̂. Exact where the link is soft;
+    where it is stiff, the strip over-estimates the body's stiffness for the modes that are
+    smooth along the contact (measured on two 3D blocks at h = 1e3, 1124 masters: the
+    eigenvalues of ``G S`` lie in [0.06, 1] with 1 layer, [0.15, 1] with 4; the smallest is
+    the constant mode, which the coarse space of the Krylov solve takes out).
+    """
+
+    layers: int = 3
+    name: str = "strip"
+
+    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
+        if self.layers < 1:
+            raise ValueError(f"exact corrector on a strip: layers = {self.layers}")
+        slaves = body.slaves[interface].local_dofs
+        strip = dofs_within_layers(body.forms.W, slaves, self.layers)
+        interior = np.setdiff1d(strip, slaves).astype(np.int32)
+        K_ee, coupling = body.condense(interface, interior)
+        K_hat = body.clamp_fixed(interface, K_ee - coupling)
+        at, blocks = body.position[interface], body.blocks[interface]
+        L = blocks["L"][at][:, at].toarray()
+        C = -L if "CtP" not in blocks else -L + blocks["CtP"][:, at].toarray()
+        B = blocks["BP"][at].toarray()
+        return body.link_stiffness(interface) - C @ np.linalg.solve(K_hat + L, B)
 
 
 def dofs_within_layers(

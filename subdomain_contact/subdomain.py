@@ -32,7 +32,8 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.correctors import Corrector, Exact, PartialCondensation
+from subdomain_contact.correctors import Corrector, Exact, StripExact
+from subdomain_contact.modes import modes
 from subdomain_contact.system import System
 
 __all__ = [
@@ -75,6 +76,7 @@ class InterfaceResult:
         history: Largest master residual relative to its channel's flux scale, per round.
         krylov_iterations: Krylov iterations of each refinement step (empty: fixed point).
         applications: Operator applications by homogeneous body solves (matrix-free S^α).
+        body_iterations: Krylov iterations of the iterative body solves, over every body.
         converged: Whether the tolerance was met.
         seconds: Wall time [s].
     """
@@ -83,6 +85,7 @@ class InterfaceResult:
     history: list[float] = field(default_factory=list)
     krylov_iterations: list[int] = field(default_factory=list)
     applications: int = 0
+    body_iterations: int = 0
     converged: bool = False
     seconds: float = 0.0
 
@@ -95,9 +98,20 @@ class SubdomainConvergenceError(RuntimeError):
         self.result = result
 
 
-#: Element layers of the partial condensation that preconditions the interface Krylov by
-#: default where a body is spread over several ranks (see :class:`Subdomains`).
-SPREAD_LAYERS = 2
+#: Element layers of the exact corrector on a strip, the default preconditioner of the
+#: interface Krylov where a body's ``S^α`` is only applied (see :class:`Subdomains`).
+STRIP_LAYERS = 3
+
+#: An iterative body solve stops at this fraction of the interface's relative tolerance: its
+#: error enters the master residual the body returns, and must not decide its convergence.
+BODY_RTOL_FACTOR = 1e-2
+
+#: Inside the interface Krylov an operator application may be less exact as the residual
+#: falls (relaxed inexact Krylov, van den Eshof & Sleijpen 2004): the body solves of
+#: iteration j stop at ``RELAXATION / ‖W r_j‖`` (W: the weights that make the Krylov
+#: target ‖W r‖ ≤ ½), never looser than :data:`RELAXED_LOOSEST`; the true rounds that check
+#: the solution keep the tight tolerance.
+RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 
 
 class Subdomains:
@@ -105,19 +119,21 @@ class Subdomains:
 
     Args:
         corrector: How the masters are corrected. Default: the exact corrector; where a body
-            spread over several ranks has more master DOFs than ``dense_limit`` (its exact
-            part would cost one body solve per master DOF), partial condensation on
-            :data:`SPREAD_LAYERS` element layers as the preconditioner of the interface
-            Krylov, which applies that body's ``S^α`` by one body solve per iteration.
+            solved iteratively, or spread over several ranks with more master DOFs than
+            ``dense_limit`` (its exact part would cost one body solve per master DOF), the
+            exact corrector on a strip of :data:`STRIP_LAYERS` element layers as the
+            preconditioner of the interface Krylov, which applies that body's ``S^α`` by one
+            body solve per iteration.
         krylov: ``True``: GMRES (CG for a symmetric problem) on every interface at once;
             ``False``: the paper's fixed point; ``None``: Krylov where some body touches
-            several interfaces, floats, or is spread with many master DOFs (above), else
-            the fixed point.
+            several interfaces, floats, is solved iteratively or is spread with many master
+            DOFs (above), else the fixed point.
         coarse: Add the coarse correction to the Krylov preconditioner.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body on one rank forms it from its Schur
-            block (dense algebra), and a body spread over several ranks up to 32 master DOFs
-            (forming it costs one body solve per master DOF).
+            block (dense algebra), and a body spread over several ranks or solved
+            iteratively up to 32 master DOFs (forming it costs one body solve per master
+            DOF).
         max_rounds: Rounds of the fixed point, or Krylov iterations per refinement step.
         max_refinements: Krylov refinement steps after the first.
         divergence: The fixed point stops when its residual grows past this multiple of its
@@ -143,6 +159,7 @@ class Subdomains:
         self.krylov, self.coarse, self.dense_limit = krylov, coarse, dense_limit
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
+        self._body_rtol = BODY_RTOL_FACTOR * Tolerance().rtol
         self.system: System | None = None
 
     # -- set-up ---------------------------------------------------------------------------
@@ -159,7 +176,7 @@ class Subdomains:
             any(not (b.schur or self._dense(b)) for b in system.bodies.values()), op=MPI.LOR
         )
         if self.given is None:
-            self.corrector = PartialCondensation(layers=SPREAD_LAYERS) if costly else Exact()
+            self.corrector = StripExact(layers=STRIP_LAYERS) if costly else Exact()
         if self.krylov is None:
             several = any(len(scene.interfaces_of(b)) > 1 for b in scene.bodies)
             self.use_krylov = several or any(system.floating.values()) or costly
@@ -288,12 +305,32 @@ class Subdomains:
         """
         start = time.perf_counter()
         result = InterfaceResult()
-        if self.use_krylov:
-            y = self._solve_krylov(b, tolerance, result)
-        else:
-            y = self._solve_fixed_point(b, tolerance, result)
+        self._body_rtol = BODY_RTOL_FACTOR * tolerance.rtol
+        self._tighten()
+        before = self._body_iterations()
+        try:
+            if self.use_krylov:
+                y = self._solve_krylov(b, tolerance, result)
+            else:
+                y = self._solve_fixed_point(b, tolerance, result)
+        except SubdomainConvergenceError:  # collective: every rank has the same residual
+            result.body_iterations = self._body_iterations() - before
+            result.seconds = time.perf_counter() - start
+            raise
+        result.body_iterations = self._body_iterations() - before
         result.seconds = time.perf_counter() - start
         return y, result
+
+    def _tighten(self, rtol: float | None = None) -> None:
+        """Set the iterative bodies' tolerance (default: the tight one of the true rounds)."""
+        for body in self.system.bodies.values():
+            body.set_rtol(self._body_rtol if rtol is None else rtol)
+
+    def _body_iterations(self) -> int:
+        """Iterations of the iterative body solves so far, over every body (collective)."""
+        bodies = self.system.bodies.values()
+        mine = sum(b.solve_iterations for b in bodies if b.comm.rank == 0)
+        return self.system.comm.allreduce(mine, op=MPI.SUM)
 
     def _solve_fixed_point(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         system = self.system
@@ -377,7 +414,7 @@ class Subdomains:
             if not layers:
                 continue
             centre = np.concatenate([layer.coordinates for layer in layers]).mean(axis=0)
-            for mode in _modes(system.problem.fields, scene.bodies[body].mesh.geometry.dim):
+            for mode in modes(system.problem.fields, scene.bodies[body].mesh.geometry.dim):
                 z = np.zeros(self.size)
                 for layer in layers:
                     values = [mode(f, c, layer.coordinates - centre) for f, c in layer.channels]
@@ -395,6 +432,7 @@ class Subdomains:
         scales: dict[str, Vector] = {}
         symmetric = system.symmetric
         for step in range(self.max_refinements + 1):
+            self._tighten()
             y, residual, pushed = self._round(b, increments)
             scales = scales or self._flux_scales(pushed)
             relative, small = self._measure(residual, scales, tolerance)
@@ -475,6 +513,13 @@ class Subdomains:
         ksp.getPC().setType("python")
         ksp.getPC().setPythonContext(_Preconditioner(self, weights))
         ksp.setTolerances(rtol=0.0, atol=0.5, max_it=self.max_rounds)
+        if any(body.iterative for body in system.bodies.values()):
+
+            def relax(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
+                loose = min(RELAXED_LOOSEST, RELAXATION / max(norm, 1e-300))
+                self._tighten(max(self._body_rtol, loose))
+
+            ksp.setMonitor(relax)
         if self.monitor is not None:
             done = self._iterations_done
 
@@ -534,31 +579,6 @@ def _default_option(name: str, value: str) -> bool:
         return False
     options.setValue(name, value)
     return True
-
-
-def _modes(fields: tuple[str, ...], dim: int) -> list[Callable]:
-    """A body's coarse modes: ``mode(field, component, x) -> values at points x``."""
-
-    def constant(of: str) -> Callable:
-        return lambda f, c, x: np.full(len(x), 1.0 if f == of else 0.0)
-
-    def translation(d: int) -> Callable:
-        return lambda f, c, x: np.full(len(x), 1.0 if f == "displacement" and c == d else 0.0)
-
-    def rotation(a: int, b: int) -> Callable:  # in the plane of axes a, b: (−x_b, x_a)
-        def mode(f, c, x):
-            if f != "displacement":
-                return np.zeros(len(x))
-            return -x[:, b] if c == a else (x[:, a] if c == b else np.zeros(len(x)))
-
-        return mode
-
-    modes = [constant(f) for f in fields if f != "displacement"]
-    if "displacement" in fields:
-        modes += [translation(d) for d in range(dim)]
-        planes = [(0, 1)] if dim == 2 else [(0, 1), (1, 2), (0, 2)]
-        modes += [rotation(a, b) for a, b in planes]
-    return modes
 
 
 def _describe(tolerance: Tolerance) -> str:

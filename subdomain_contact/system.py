@@ -57,6 +57,26 @@ def _assign(body: Body, pairs) -> bool:
     return bool(changed)
 
 
+#: DOFs above which a body meshed in 3D is solved iteratively by default (``solver="auto"``):
+#: there the sparse factorisation outgrows the mesh (benchmarks/bench_3d_iterative.py).
+ITERATIVE_ABOVE = 100_000
+
+
+def _iterative(problem: Problem, body, solver: str, prefix: str) -> bool:
+    """Whether a body is solved by Krylov + AMG: the option, else ``solver``, else the rule."""
+    options = PETSc.Options()
+    if options.hasName(prefix + "solver"):
+        solver = options.getString(prefix + "solver")
+        if solver not in ("direct", "iterative"):
+            raise ValueError(f"-{prefix}solver {solver}: give 'direct' or 'iterative'")
+    if solver != "auto":
+        return solver == "iterative"
+    mesh = body.mesh
+    nodes = mesh.geometry.index_map().size_global
+    per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
+    return mesh.topology.dim == 3 and nodes * per_node > ITERATIVE_ABOVE
+
+
 class System:
     """Every body of this rank's group and every master layer of a problem, with its state.
 
@@ -65,11 +85,19 @@ class System:
         prefix: Options prefix of the bodies' factorisations: ``<prefix>body_<name>_``.
         schur: Factorise a body held by one rank with its contact DOFs left as a dense Schur
             block (False: factorise every body whole, as a body on several ranks is).
+        solver: How the bodies are solved: ``"direct"`` (MUMPS), ``"iterative"`` (Krylov +
+            AMG, :data:`~subdomain_contact.body.ITERATIVE`) or ``"auto"``: iterative for a
+            body meshed in 3D with more than :data:`ITERATIVE_ABOVE` DOFs. The option
+            ``-<prefix>body_<name>_solver direct|iterative`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.
     """
 
-    def __init__(self, problem: Problem, *, prefix: str = "sc_", schur: bool = True) -> None:
+    def __init__(
+        self, problem: Problem, *, prefix: str = "sc_", schur: bool = True, solver: str = "auto"
+    ) -> None:
+        if solver not in ("auto", "direct", "iterative"):
+            raise ValueError(f"solver='{solver}': give 'auto', 'direct' or 'iterative'")
         scene = problem.scene
         self.problem, self.comm, self.prefix = problem, scene.comm, prefix
         gc.collect()  # what earlier systems left: petsc4py hands it to PETSc's garbage,
@@ -89,9 +117,11 @@ class System:
             if scene.is_local(name):
                 mine = {i.name: self.layers[i.name] for i in scene.interfaces_of(name)}
                 try:  # bad data is refused on every rank of the body: tell the other groups
+                    at = f"{prefix}body_{name}_"
                     self.bodies[name] = Body(
-                        problem, body, mine, prefix=f"{prefix}body_{name}_", schur=schur
-                    )
+                        problem, body, mine, prefix=at, schur=schur,
+                        iterative=_iterative(problem, body, solver, at),
+                    )  # fmt: skip
                 except ValueError as error:
                     failure = error
                     break
