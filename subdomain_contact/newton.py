@@ -103,22 +103,6 @@ class Result:
         fields = [f for f, value in self.scale.items() if value > 0]
         return np.array([max(s.fields[f] / self.scale[f] for f in fields) for s in self.history])
 
-    def order(self, floor: float = 1e-10) -> float:
-        """Convergence order from the last three iterates whose relative residual is > floor.
-
-        For ``ρ_{k+1} = C ρ_k²`` this is ``2 + ln(C_k/C_{k−1}) / ln(ρ_k/ρ_{k−1})``; a linear
-        rate gives about 1. Below ``floor`` the residual is round-off, not Newton: choose it
-        above the relative residual the converged state itself leaves.
-
-        Raises:
-            ValueError: Fewer than three iterates above ``floor``.
-        """
-        rho = self.relative_residuals()
-        above = rho[rho > floor][-3:]
-        if len(above) < 3:
-            raise ValueError(f"order: fewer than three relative residuals above {floor:g}: {rho}")
-        return float(np.log(above[2] / above[1]) / np.log(above[1] / above[0]))
-
     def table(self) -> str:
         """The history as text lines, one per iterate."""
         return "\n".join(
