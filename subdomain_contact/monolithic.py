@@ -214,12 +214,19 @@ def _body_entries(
             if "CtP" in blocks:
                 C = C + blocks["CtP"]
             C = C.tocoo()
-            active = system.active[k]
-            D = np.where(np.outer(active, active), body.link_stiffness(k), 0.0)
-            D[~active, ~active] = 0.5
-            i, j = np.indices(D.shape)
             masters.append((at + C.row, kept[C.col], C.data))
-            masters.append((at + i.ravel(), at + j.ravel(), D.ravel()))
+            # P_kᵀ D_k P_k, sparse (the half-link's mass-like block), its stored pattern
+            # whole; an inactive master row and column hold 1/2 on the diagonal alone
+            D = -blocks["BP"][body.position[k]]
+            if "DtP" in blocks:
+                D = D + blocks["DtP"]
+            D = D.tocoo()
+            active = system.active[k]
+            both = active[D.row] & active[D.col]
+            idle = np.flatnonzero(~active)
+            masters.append((at + np.concatenate([D.row[both], idle]),
+                            at + np.concatenate([D.col[both], idle]),
+                            np.concatenate([D.data[both], np.full(idle.size, 0.5)])))  # fmt: skip
     return rows, masters
 
 
