@@ -8,7 +8,7 @@ state and residual) → ``correctors`` and ``subdomain`` (the subdomain iteratio
 or interface Krylov) or ``monolithic`` (the reference) → ``newton`` (SNES outside) →
 ``transient`` (backward Euler and BDF2 steps, fixed or adaptive) → ``history`` (probes per
 step, VTK series, checkpoints and restart) → ``readback`` (integrals by group, contact fields,
-balances) and ``io`` (VTK).
+balances) and ``io`` (VTK); ``data`` reads materials and contact laws from TOML files.
 Import ``dolfinx_solver`` before this package (this module does it).
 """
 
@@ -23,6 +23,7 @@ from subdomain_contact.correctors import (
     StripExact,
     paper_factor,
 )
+from subdomain_contact.data import load_contact, load_material
 from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
@@ -107,6 +108,8 @@ __all__ = [
     "force",
     "heat",
     "laws",
+    "load_contact",
+    "load_material",
     "load_scene",
     "paper_factor",
     "plot_vtk",

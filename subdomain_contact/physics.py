@@ -146,8 +146,12 @@ class Contact:
         conductance: Thermal conductance h(p, T) [W/(m^2 K)]; 0: an insulating contact.
         electrical_conductance: Electrical conductance g(p, T) [S/m^2]; 0: insulating.
         normal: Pressure–closure law; unilateral (no tension).
-        tangential: ``"free"`` (no friction) or ``"stuck"`` (penalised slip, with the normal
-            law's initial stiffness).
+        tangential: ``"free"`` (no friction) or ``"stuck"`` (slip penalised by
+            ``slip_stiffness``).
+        slip_stiffness: Stiffness [Pa/m] of the spring against the slip of a stuck contact;
+            default the normal law's initial stiffness (bonded). A small one lets the sides
+            slide against a weak spring that still holds their rigid motions along the
+            contact.
         gap: Initial gap [m] between the two sides (0: touching).
         pressure: Pressure [Pa] the laws see when the scene has no displacement field.
         temperature: Temperature [K] the laws see when the scene has no temperature field.
@@ -164,6 +168,7 @@ class Contact:
     electrical_conductance: float | Law | None = None
     normal: NormalLaw | None = None
     tangential: str = "free"
+    slip_stiffness: float | None = None
     gap: float = 0.0
     pressure: float = 0.0
     temperature: float = 0.0
@@ -422,6 +427,8 @@ class Problem:
             check_finite(c.normal.stiffness, f"interface '{name}': normal stiffness", positive=True)
         if c.tangential not in ("free", "stuck"):
             raise ValueError(f"interface '{name}': tangential = {c.tangential!r}: free or stuck")
+        if c.slip_stiffness is not None:
+            check_finite(c.slip_stiffness, f"interface '{name}': slip_stiffness", positive=True)
         for attr in ("gap", "pressure", "temperature", "joule_to_first"):
             check_finite(getattr(c, attr), f"interface '{name}': {attr}")
         if not 0 <= c.joule_to_first <= 1:
@@ -814,7 +821,8 @@ def _half_link(
         tie = kappa * stretch * ufl.dot(n, v["displacement"])
         if c.tangential == "stuck":
             slip = j - ufl.dot(j, n) * n
-            body += constant(2.0 * c.normal.stiffness) * ufl.dot(slip, v["displacement"])
+            spring = c.normal.stiffness if c.slip_stiffness is None else c.slip_stiffness
+            body += constant(2.0 * spring) * ufl.dot(slip, v["displacement"])
     laws = {}
     if "temperature" in jump:
         laws["conductance"] = _law(c.conductance, constant)(pressure, T_m)

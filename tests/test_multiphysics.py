@@ -586,3 +586,49 @@ def test_young_and_expansion_may_follow_the_temperature(bars, comm):
     assert force[0] / 0.1 == pytest.approx(exact.pressure(50.0), rel=1e-9)
     constant = BlocksBetweenWalls((0.5, 0.5), (200e9,) * 2, (0.3,) * 2, (1.2e-5,) * 2, 1e-4, 1e13)
     assert abs(exact.pressure(50.0) / constant.pressure(50.0) - 1) > 1e-2  # the laws matter
+
+
+def test_a_weak_slip_spring_carries_its_own_force(bars, comm):
+    """Bar A clamped on the left, bar B's right end moved up by δ, a stuck contact whose slip
+    is held by a spring k_t far weaker than the bars: the shear force across the contact is
+    k_t · 0.1 m · δ (per metre of depth).
+
+    The bars give way by F / (3 E I / L³) each (cantilevers, 4e8 N/m²): 5e-7 of the slip, so
+    the force is k_t · 0.1 · δ within 1e-5 (20 times that)."""
+    steel = Material(conductivity=45.0, young=200e9, poisson=0.3)
+    k_t, delta = 1e3, 1e-5
+    problem = Problem(
+        bars,
+        {"plate_A": steel, "plate_B": steel},
+        {
+            "contact": Contact(
+                conductance=1e4, normal=Penalty(1e13), tangential="stuck", slip_stiffness=k_t
+            )
+        },
+        [
+            Temperature("left", 300.0),
+            Displacement("left", 0, 0.0),
+            Displacement("left", 1, 0.0),
+            Displacement("right", 0, 0.0),
+            Displacement("right", 1, delta),
+        ],
+    )
+    system = make_system(problem)
+    system.reset({"temperature": 300.0})
+    sc.solve(system, rtol=1e-12)
+    shear = abs(sc.force(system, "contact")[1])
+    assert shear == pytest.approx(k_t * 0.1 * delta, rel=1e-5)
+    with pytest.raises(ValueError, match="slip_stiffness"):
+        make_system(
+            dataclasses.replace(
+                problem,
+                contacts={
+                    "contact": Contact(
+                        conductance=1e4,
+                        normal=Penalty(1e13),
+                        tangential="stuck",
+                        slip_stiffness=-1.0,
+                    )
+                },
+            )  # fmt: skip
+        )
