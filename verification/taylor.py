@@ -52,3 +52,22 @@ def jacobian_orders(
         for v in (x, f0, jd, f):
             v.destroy()
     return [{k: float(np.log2(a[k] / b[k])) for k in a} for a, b in itertools.pairwise(remainders)]
+
+
+def jacobian_orders_toward(
+    system, solution: PETSc.Vec, initial: dict[str, float], **kwargs
+) -> list[dict[str, float]]:
+    """:func:`jacobian_orders` at ``solution``, along the way back to a uniform start.
+
+    The direction is the start ``initial`` (``system.reset``, with the conditions applied, so
+    it is zero on fixed DOFs) minus the solution; the system is left at ``solution``.
+    """
+    system.reset(initial)
+    system.apply_conditions()
+    direction = system.state()
+    direction.axpy(-1.0, solution)
+    system.set_state(solution)
+    try:
+        return jacobian_orders(system, direction, **kwargs)
+    finally:
+        direction.destroy()
