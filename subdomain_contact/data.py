@@ -147,13 +147,13 @@ def _expansion(data: dict, reference: float, where: str) -> float | Law:
         strain = alpha * (temperature - STRAIN_REFERENCE)
     else:
         raise ValueError(f"{where}: neither [thermal_strain] nor [expansion]")
+    if len(temperature) < 2:
+        raise ValueError(f"{where}: [{key}] needs two temperatures or more")
     at_reference = float(np.interp(reference, temperature, strain))
     slope = float(np.interp(reference, temperature[1:], np.diff(strain) / np.diff(temperature)))
     distance = temperature - reference
     near = np.abs(distance) < 1e-6
     secant = np.where(near, slope, (strain - at_reference) / np.where(near, 1.0, distance))
-    if len(temperature) == 1:
-        return float(secant[0])
     return Table((0.0,), tuple(map(float, temperature)), [list(map(float, secant))])
 
 
