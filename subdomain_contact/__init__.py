@@ -20,7 +20,7 @@ from subdomain_contact.correctors import (
     Method1,
     Method2,
     PartialCondensation,
-    StripExact,
+    SparseStrip,
     paper_factor,
 )
 from subdomain_contact.data import load_contact, load_material
@@ -92,9 +92,9 @@ __all__ = [
     "Result",
     "Scene",
     "Schedule",
+    "SparseStrip",
     "StepFailedError",
     "Stepper",
-    "StripExact",
     "SubdomainConvergenceError",
     "Subdomains",
     "System",

@@ -6,13 +6,14 @@ The paper's correctors (eqs. 5–8) blend one correction per body with β:
 partial condensation on a strip of element layers scaled by X (eqs. 9–10). The exact corrector
 (METHOD.md §4) uses each body's whole interface response ``S^α`` (the series law
 ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` in the thermal case, the condensed Jacobian ``D − C A⁻¹ B`` for coupled
-fields), ``G = (S^A + S^B)⁻¹``: one correction for a linear interface at any h. The exact
-corrector on a strip replaces each body by the element layers along the contact, clamped
-beyond: the same law at a cost that does not grow with the body, the preconditioner of the
-interface Krylov where ``S^α`` is only applied (a body solved iteratively, or spread over ranks).
+fields), ``G = (S^A + S^B)⁻¹``: one correction for a linear interface at any h.
 
 Every part is a small dense matrix over the interface's master DOFs (all its channels),
-computed where the body lives; ``combine`` runs everywhere.
+computed where the body lives; ``combine`` runs everywhere. The exact corrector on a strip,
+:class:`SparseStrip`, is the exception: it replaces each body by the element layers along its
+contacts, clamped beyond, and solves those strips and every master layer together by one
+sparse factorisation, storing nothing dense: the preconditioner of the interface Krylov where
+``S^α`` is only applied (a body solved iteratively, spread over ranks, or thin).
 """
 
 from __future__ import annotations
@@ -23,8 +24,12 @@ from typing import Protocol
 import dolfinx
 import numpy as np
 import numpy.typing as npt
+from petsc4py import PETSc
 
 from subdomain_contact.body import Body
+from subdomain_contact.merged import Layout, merged_matrix
+from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+from subdomain_contact.system import System
 
 __all__ = [
     "Corrector",
@@ -32,7 +37,7 @@ __all__ = [
     "Method1",
     "Method2",
     "PartialCondensation",
-    "StripExact",
+    "SparseStrip",
     "paper_factor",
 ]
 
@@ -151,34 +156,97 @@ class Exact:
 
 
 @dataclass(frozen=True, kw_only=True)
-class StripExact(Exact):
-    """The exact corrector with each body cut to ``layers`` element layers along the contact.
+class SparseStrip:
+    """The exact corrector on a strip, for every interface at once, by a sparse solve.
 
-    ``S̃^α = D − C (K̂ + L)⁻¹ B`` on the slaves of the interface, with K̂ the solid (its other
-    half-links included) condensed on them over the strip, clamped beyond it: the series law
-    ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` of the thermal case with a stiffer K̂. Exact where the link is soft;
-    where it is stiff, the strip over-estimates the body's stiffness for the modes that are
-    smooth along the contact (measured on two 3D blocks at h = 1e3, 1124 masters: the
-    eigenvalues of ``G S`` lie in [0.06, 1] with 1 layer, [0.15, 1] with 4; the smallest is
-    the constant mode, which the coarse space of the Krylov solve takes out).
+    The merged matrix restricted to ``layers`` element layers of every body along its
+    contacts and to every master layer, clamped beyond the strips. Eliminating the strips
+    leaves ``Σ_α S̃^α`` on the masters, ``S̃^α = D − C (K̂ + L)⁻¹ B`` with K̂ the body cut to
+    its strip: the series law ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` of the thermal case with a stiffer K̂,
+    exact where the link is soft; where it is stiff, the strip is too stiff for the modes
+    smooth along the contact (the coarse space takes out the constant one). The interfaces
+    are coupled through the bodies, not corrected one by one. Applied by one solve of that
+    sparse matrix (MUMPS, options under ``-<prefix>``): nothing dense is stored, so it serves
+    interfaces of any size and bodies whose contact DOFs are most of their DOFs.
     """
 
-    layers: int = 3
-    name: str = "strip"
+    layers: int = 10
+    prefix: str = "sc_strip_"
+    name: str = "sparse strip"
 
-    def part(self, interface: str, body: Body) -> Matrix:  # noqa: D102
+    def build(self, system: System, operator: StripSolve | None = None) -> StripSolve:
+        """Its operator for the system's assembled blocks (``operator``: the last one, kept)."""
         if self.layers < 1:
-            raise ValueError(f"exact corrector on a strip: layers = {self.layers}")
-        slaves = body.slaves[interface].local_dofs
-        strip = dofs_within_layers(body.forms.W, slaves, self.layers)
-        interior = np.setdiff1d(strip, slaves).astype(np.int32)
-        K_ee, coupling = body.condense(interface, interior)
-        K_hat = body.clamp_fixed(interface, K_ee - coupling)
-        at, blocks = body.position[interface], body.blocks[interface]
-        L = blocks["L"][at][:, at].toarray()
-        C = -L if "CtP" not in blocks else -L + blocks["CtP"][:, at].toarray()
-        B = blocks["BP"][at].toarray()
-        return body.link_stiffness(interface) - C @ np.linalg.solve(K_hat + L, B)
+            raise ValueError(f"sparse strip corrector: layers = {self.layers}")
+        if operator is None:
+            operator = StripSolve(self.prefix)
+        operator.update(system, self.layers)
+        return operator
+
+
+class StripSolve:
+    """``G r``: the master part of the strips' merged matrix solved for ``r`` on the masters.
+
+    Call :meth:`destroy` (collectively) when done.
+    """
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix = prefix
+        self.K: PETSc.Mat | None = None
+        self.ksp: PETSc.KSP | None = None
+        self.rows: PETSc.IS | None = None
+        #: Factorisations made
+        self.factorisations = 0
+
+    def update(self, system: System, layers: int) -> None:
+        """Restrict the merged matrix to the strips and factorise (its analysis kept)."""
+        self.comm = system.comm
+        if self.rows is None:
+            layout = Layout(system)
+            picked = []
+            for name, body in system.bodies.items():
+                seeds = np.unique(np.concatenate([s.local_dofs for s in body.slaves.values()]))
+                strip = dofs_within_layers(body.forms.W, seeds.astype(np.int32), layers)
+                picked.append(layout.body(name, body.start + strip))
+            self.masters = 0
+            if self.comm.rank == 0:
+                first = layout.mine + system.master_slice.start
+                self.masters = system.local_size - system.master_slice.start
+                picked.append(np.arange(first, first + self.masters))
+            indices = np.sort(np.concatenate(picked)).astype(PETSc.IntType)
+            self.rows = PETSc.IS().createGeneral(indices, comm=self.comm)
+        whole = merged_matrix(system)
+        K = whole.createSubMatrix(self.rows, self.rows)
+        whole.destroy()
+        if self.K is not None and K.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
+            K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
+            K.destroy()
+            self.ksp.setOperators(self.K)
+            self.ksp.setUp()
+        else:  # the first, or contacts changed the pattern
+            destroy(self.K, self.ksp)
+            self.K, self.ksp = K, make_ksp(K, self.prefix, DIRECT)
+        self.factorisations += 1
+
+    def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """``G r`` for concatenated master residuals r (replicated; the result too)."""
+        rhs, x = self.K.createVecs()
+        rhs.set(0.0)
+        if self.comm.rank == 0:
+            rhs.array[rhs.local_size - self.masters :] = r
+        self.ksp.solve(rhs, x)
+        if self.ksp.getConvergedReason() < 0:
+            raise RuntimeError(
+                f"sparse strip corrector: solve failed ({self.ksp.getConvergedReason()})"
+            )
+        z = x.array[x.local_size - self.masters :].copy() if self.comm.rank == 0 else None
+        destroy(rhs, x)
+        return self.comm.bcast(z, root=0)
+
+    def destroy(self) -> None:
+        """Free the matrix, its factorisation and the index set (collective)."""
+        destroy(self.K, self.ksp, self.rows)
+        self.K = self.ksp = self.rows = None
 
 
 def dofs_within_layers(

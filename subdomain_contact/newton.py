@@ -277,6 +277,7 @@ def solve(
             or at the solution (the state is kept, for a look).
     """
     start = time.perf_counter()
+    own = linear is None  # made here: destroyed here
     linear = linear or Subdomains()
     linear.check(system)
     system.check_laws("at the initial state")
@@ -301,6 +302,8 @@ def solve(
             ) from last.__cause__
     finally:
         initial.destroy()
+        if own:
+            linear.destroy()
     system.check_laws("at the solution Newton found", at_solution=True)
     result.line_search = attempt
     result.seconds = time.perf_counter() - start

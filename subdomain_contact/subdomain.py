@@ -32,7 +32,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.correctors import Corrector, Exact, StripExact
+from subdomain_contact.correctors import Corrector, Exact, SparseStrip, StripSolve
 from subdomain_contact.modes import modes
 from subdomain_contact.system import System
 
@@ -98,10 +98,6 @@ class SubdomainConvergenceError(RuntimeError):
         self.result = result
 
 
-#: Element layers of the exact corrector on a strip, the default preconditioner of the
-#: interface Krylov where a body's ``S^α`` is only applied (see :class:`Subdomains`).
-STRIP_LAYERS = 3
-
 #: An iterative body solve stops at this fraction of the interface's relative tolerance: its
 #: error enters the master residual the body returns, and must not decide its convergence.
 BODY_RTOL_FACTOR = 1e-2
@@ -119,11 +115,12 @@ class Subdomains:
 
     Args:
         corrector: How the masters are corrected. Default: the exact corrector; where a body
-            solved iteratively, or spread over several ranks with more master DOFs than
+            has no Schur block (solved iteratively, spread over several ranks, or thin: see
+            :data:`~subdomain_contact.body.SCHUR_FRACTION`) and more master DOFs than
             ``dense_limit`` (its exact part would cost one body solve per master DOF), the
-            exact corrector on a strip of :data:`STRIP_LAYERS` element layers as the
-            preconditioner of the interface Krylov, which applies that body's ``S^α`` by one
-            body solve per iteration.
+            exact corrector on a strip (:class:`~subdomain_contact.correctors.SparseStrip`)
+            as the preconditioner of the interface Krylov, which applies that body's ``S^α``
+            by one body solve per iteration.
         krylov: ``True``: GMRES (CG for a symmetric problem) on every interface at once;
             ``False``: the paper's fixed point; ``None``: Krylov where some body touches
             several interfaces, floats, is solved iteratively or is spread with many master
@@ -161,6 +158,21 @@ class Subdomains:
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
         self._body_rtol = BODY_RTOL_FACTOR * Tolerance().rtol
         self.system: System | None = None
+        self.strip: StripSolve | None = None  # the sparse strip corrector's operator
+        self._freed_factorisations = 0
+
+    @property
+    def factorisations(self) -> int:
+        """Sparse factorisations of the solver's own (the sparse strip corrector's)."""
+        current = self.strip.factorisations if self.strip is not None else 0
+        return self._freed_factorisations + current
+
+    def destroy(self) -> None:
+        """Free the sparse strip corrector's matrix and factorisation (collective)."""
+        if self.strip is not None:
+            self._freed_factorisations += self.strip.factorisations
+            self.strip.destroy()
+            self.strip = None
 
     # -- set-up ---------------------------------------------------------------------------
     def check(self, system: System) -> None:
@@ -168,6 +180,8 @@ class Subdomains:
 
     def setup(self, system: System) -> None:
         """Factorise the assembled bodies; build the correctors (and Krylov's operators)."""
+        if self.system is not system:
+            self.destroy()
         self.system = system
         for body in system.bodies.values():
             body.factorise()
@@ -176,23 +190,26 @@ class Subdomains:
             any(not (b.schur or self._dense(b)) for b in system.bodies.values()), op=MPI.LOR
         )
         if self.given is None:
-            self.corrector = StripExact(layers=STRIP_LAYERS) if costly else Exact()
+            self.corrector = SparseStrip() if costly else Exact()
         if self.krylov is None:
             several = any(len(scene.interfaces_of(b)) > 1 for b in scene.bodies)
             self.use_krylov = several or any(system.floating.values()) or costly
         else:
             self.use_krylov = bool(self.krylov)
-        parts = system.everywhere(
-            {
-                (k, name): self._part(k, body)
-                for name, body in system.bodies.items()
-                for k in body.layers
+        if isinstance(self.corrector, SparseStrip):
+            self.strip, self.operators = self.corrector.build(system, self.strip), {}
+        else:
+            parts = system.everywhere(
+                {
+                    (k, name): self._part(k, body)
+                    for name, body in system.bodies.items()
+                    for k in body.layers
+                }
+            )
+            self.operators = {
+                k: self._combine(k, i.bodies, (parts[k, i.bodies[0]], parts[k, i.bodies[1]]))
+                for k, i in scene.interfaces.items()
             }
-        )
-        self.operators = {
-            k: self._combine(k, i.bodies, (parts[k, i.bodies[0]], parts[k, i.bodies[1]]))
-            for k, i in scene.interfaces.items()
-        }
         names = list(system.sizes)
         ends = np.cumsum([0] + [system.sizes[k] for k in names])
         self.slices = {k: slice(int(ends[i]), int(ends[i + 1])) for i, k in enumerate(names)}
@@ -354,8 +371,9 @@ class Subdomains:
                 )
             if small:
                 return y
-            for k, r in residual.items():
-                increments[k] = increments[k] - self.operators[k] @ r
+            flat = self.correct(np.concatenate([residual[k] for k in self.slices]))
+            for k, s in self.slices.items():
+                increments[k] = increments[k] - flat[s]
         raise SubdomainConvergenceError(
             f"{self.corrector.name}: no convergence to {_describe(tolerance)} in "
             f"{self.max_rounds} rounds (relative master residuals {_short(result.history)}): "
@@ -389,11 +407,18 @@ class Subdomains:
         out = np.concatenate([total[k] for k in self.slices])
         return np.where(self.active, out, v)
 
-    def precondition(self, r: Vector) -> Vector:
-        """Per-interface correctors plus the coarse correction (additive)."""
+    def correct(self, r: Vector) -> Vector:
+        """``G r``: the corrector on every interface (concatenated master vectors)."""
+        if self.strip is not None:
+            return self.strip.apply(r)
         z = np.zeros(self.size)
         for k, s in self.slices.items():
             z[s] = self.operators[k] @ r[s]
+        return z
+
+    def precondition(self, r: Vector) -> Vector:
+        """The correctors plus the coarse correction (additive)."""
+        z = self.correct(r)
         if self.coarse_matrix is not None:
             Z = self.coarse_basis
             z += Z @ np.linalg.solve(self.coarse_matrix, Z.T @ r)

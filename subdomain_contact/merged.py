@@ -1,0 +1,171 @@
+"""The whole Jacobian as one matrix: bodies and master layers merged, assembled or not.
+
+Unknowns ``[y^α ..., y_m,k ...]`` in the global-vector layout; blocks ``A^α`` (each body's
+whole matrix), ``B^α_k P_k`` between a body and a master layer, ``P_kᵀ C^α_k`` back, and
+``Σ_α P_kᵀ D^α_k P_k`` on each master layer. Masters of an insulating contact have no
+equation: their rows hold the identity. Used by the monolithic reference and by the sparse
+strip corrector (its rows and columns restricted to strips along the contacts).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from subdomain_contact.solvers import destroy
+from subdomain_contact.system import System
+
+__all__ = ["Layout", "merged_matrix", "unassembled_matrix"]
+
+
+class Layout:
+    """Global indices of the system's unknowns (the global-vector layout), on every rank."""
+
+    def __init__(self, system: System) -> None:
+        comm = system.comm
+        offsets = np.cumsum([0, *comm.allgather(system.local_size)])
+        self.size, self.mine = int(offsets[-1]), int(offsets[comm.rank])
+        first = int(offsets[0]) + comm.bcast(system.master_slice.start, root=0)
+        ends = np.cumsum([0, *system.sizes.values()])
+        #: interface -> global index of its first master
+        self.master_at = {k: first + int(e) for k, e in zip(system.sizes, ends[:-1], strict=True)}
+        self._shifts = {}
+        for name, body in system.bodies.items():
+            ranges = np.asarray(body.A_bulk.getOwnershipRanges())
+            shift = self.mine + system.slices[name].start - body.start
+            self._shifts[name] = ranges, np.array(body.comm.allgather(shift))
+
+    def body(self, name: str, g: npt.NDArray) -> npt.NDArray:
+        """Global indices of a body's DOFs ``g`` (numbered on the body's communicator)."""
+        ranges, shifts = self._shifts[name]
+        return g + shifts[np.searchsorted(ranges, g, side="right") - 1]
+
+
+Entries = tuple[npt.NDArray, npt.NDArray, npt.NDArray]  # rows, columns, values
+
+
+def _body_entries(system: System, layout: Layout, name: str) -> tuple[list[Entries], list[Entries]]:
+    """A body's entries of the merged matrix, global indices, zeros included.
+
+    Returns its rows on this rank (``A``, and ``B_k P_k`` to the masters), and its share of
+    the master rows (``P_kᵀ C_k``, and ``P_kᵀ D_k P_k`` on the active masters; identity
+    halves on an insulating channel's), given by the body's first rank only.
+    """
+    body = system.bodies[name]
+    indptr, indices, data = body.whole_matrix().getValuesCSR()
+    first_row = layout.mine + system.slices[name].start
+    rows = [(first_row + np.repeat(np.arange(body.size), np.diff(indptr)),
+             layout.body(name, indices), data)]  # fmt: skip
+    masters = []
+    kept = layout.body(name, body.kept)
+    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
+    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
+    for k in body.layers:
+        blocks, at = body.blocks[k], layout.master_at[k]
+        B = blocks["BP"][free].tocoo()
+        rows.append((kept[free][B.row], at + B.col, B.data))
+        if body.comm.rank == 0:
+            C = -blocks["L"][body.position[k]]
+            if "CtP" in blocks:
+                C = C + blocks["CtP"]
+            C = C.tocoo()
+            masters.append((at + C.row, kept[C.col], C.data))
+            # P_kᵀ D_k P_k, sparse (the half-link's mass-like block), its stored pattern
+            # whole; an inactive master row and column hold 1/2 on the diagonal alone
+            D = -blocks["BP"][body.position[k]]
+            if "DtP" in blocks:
+                D = D + blocks["DtP"]
+            D = D.tocoo()
+            active = system.active[k]
+            both = active[D.row] & active[D.col]
+            idle = np.flatnonzero(~active)
+            masters.append((at + np.concatenate([D.row[both], idle]),
+                            at + np.concatenate([D.col[both], idle]),
+                            np.concatenate([D.data[both], np.full(idle.size, 0.5)])))  # fmt: skip
+    return rows, masters
+
+
+def _concatenate(parts: list[Entries]) -> Entries:
+    """One (rows, columns, values) triple of many."""
+    if not parts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+    r, c, v = (np.concatenate([part[i] for part in parts]) for i in range(3))
+    return r, c, v
+
+
+def _aij(
+    rows: npt.NDArray, columns: npt.NDArray, values: npt.NDArray, shape, size, comm
+) -> PETSc.Mat:
+    """An AIJ matrix of ``size`` from this rank's entries (local rows, global columns).
+
+    Duplicates are summed; explicit zeros are kept.
+    """
+    csr = scipy.sparse.coo_matrix((values, (rows, columns)), shape=shape).tocsr()
+    csr.sort_indices()
+    return PETSc.Mat().createAIJ(
+        size=size,
+        csr=(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data),
+        comm=comm,
+    )
+
+
+def merged_matrix(system: System) -> PETSc.Mat:
+    """The whole Jacobian as one AIJ matrix on the system's communicator.
+
+    Rows and columns follow the global-vector layout, for bodies spread over every rank or
+    held by rank groups alike. Each rank writes its bodies' rows; the master rows, summed over
+    the bodies, go to rank 0. Every stored entry is kept, zeros included, so that the matrix
+    keeps one sparsity pattern from one Newton step to the next.
+    """
+    comm, layout = system.comm, Layout(system)
+    rows, masters = [], []
+    for name in system.bodies:
+        body_rows, body_masters = _body_entries(system, layout, name)
+        rows += body_rows
+        masters += body_masters
+    gathered = comm.gather(masters, root=0)
+    if comm.rank == 0:
+        rows += [part for parts in gathered for part in parts]
+    r, c, v = _concatenate(rows)
+    n = (system.local_size, PETSc.DETERMINE)
+    return _aij(r - layout.mine, c, v, (system.local_size, layout.size), (n, n), comm)
+
+
+def unassembled_matrix(system: System) -> PETSc.Mat:
+    """The whole Jacobian left unassembled (MATIS): each rank its bodies and their masters.
+
+    The local matrix holds the bodies' rows and their shares of the master rows; PETSc sums
+    the shares of a master layer between two ranks, which is the merged matrix.
+    """
+    comm, layout = system.comm, Layout(system)
+    parts = []
+    for name in system.bodies:
+        rows, masters = _body_entries(system, layout, name)
+        parts += rows + masters
+    # local unknowns: ranges of global indices (each body's, each touched layer's masters),
+    # numbered in increasing global order
+    ranges = [(layout.mine + system.slices[name].start, body.size)
+              for name, body in system.bodies.items()]  # fmt: skip
+    touched = {k for body in system.bodies.values() for k in body.layers}
+    ranges += [(layout.master_at[k], system.sizes[k]) for k in system.sizes if k in touched]
+    ranges.sort()
+    first = np.array([a for a, _ in ranges])
+    offset = first - np.cumsum([0, *(n for _, n in ranges)])[:-1]
+
+    def local(g: npt.NDArray) -> npt.NDArray:
+        return g - offset[np.searchsorted(first, g, side="right") - 1]
+
+    r, c, v = _concatenate(parts)
+    size = sum(n for _, n in ranges)
+    block = _aij(local(r), local(c), v, (size, size), (size, size), MPI.COMM_SELF)
+    numbers = np.concatenate([np.arange(a, a + n) for a, n in ranges]) if ranges else []
+    lgmap = PETSc.LGMap().create(np.asarray(numbers, dtype=PETSc.IntType), comm=comm)
+    n = (system.local_size, PETSc.DETERMINE)
+    K = PETSc.Mat().createIS((n, n), lgmapr=lgmap, lgmapc=lgmap, comm=comm)
+    K.setISLocalMat(block)
+    K.assemble()
+    destroy(block, lgmap)
+    return K
