@@ -76,10 +76,11 @@ SCHUR_SMALL = 1000
 #: they are at most this share of its DOFs (and at most :data:`SCHUR_LIMIT`); otherwise it is
 #: factorised whole and its ``S^α`` applied by a body solve. The dense block's factorisation
 #: and response grow as its size cubed, the sparse factorisation far slower. Measured, Newton
-#: from 300 K, T, φ, u: the collector bar slot (contact shares 45, 95, 58 %; 2.3k, 4.2k,
-#: 1.8k contact DOFs) 2.0 s per step with every body's Schur block, 4.6 s with the cast iron
-#: alone whole, 1.2 s with every body whole (monolithic: 0.83 s); the row of four 3D blocks
-#: (shares 6–12 %, up to 975 contact DOFs) 21.7 s with Schur blocks, 27.7 s whole.
+#: from 300 K, T, φ, u: the collector bar slot (contact shares 45, 95, 58 %; 2.3k, 4.2k, 1.8k
+#: contact DOFs) 1 258 s with every body's Schur block, 4.7 s per step with the cast iron
+#: alone whole, 11.4 s for 10 steps with every body whole (monolithic: 8.2 s); the row of
+#: four 3D blocks (shares 6–12 %, up to 975 contact DOFs) 21.7 s with Schur blocks, 27.7 s
+#: whole.
 SCHUR_FRACTION = 0.25
 
 #: Contact DOFs above which a body gets no Schur block: the block, its LU and the body's
