@@ -51,7 +51,7 @@ from subdomain_contact.modes import modes
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor
-from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp
 
 __all__ = ["ITERATIVE", "Body"]
 
@@ -464,11 +464,11 @@ class Body:
             if not (self.is_linear and len(self.forms.fields) == 1):
                 options["ksp_type"] = "gmres"  # a Jacobian that is not symmetric
             self.ksp = make_ksp(self._A, self.prefix, options)
-        elif self.ksp is None:
-            self.ksp = make_ksp(self._A, self.prefix, DIRECT)
-        else:
+        elif self.iterative:
             self.ksp.setOperators(self._A)
             self.ksp.setUp()
+        else:
+            self.ksp = factorise(self._A, self.prefix, f"body '{self.name}'", self.ksp)
         self.factorisations += 1
 
     def _near_null_space(self) -> PETSc.NullSpace:

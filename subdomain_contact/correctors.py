@@ -28,7 +28,7 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, merged_matrix
-from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+from subdomain_contact.solvers import destroy, factorise
 from subdomain_contact.system import System
 
 __all__ = [
@@ -221,36 +221,11 @@ class StripSolve:
         if self.K is not None and K.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
             K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
             K.destroy()
-            self.ksp.setOperators(self.K)
-            self.ksp.setUp()
         else:  # the first, or contacts changed the pattern
             destroy(self.K, self.ksp)
-            self.K, self.ksp = K, make_ksp(K, self.prefix, DIRECT)
-        self._relax_workspace()
+            self.K, self.ksp = K, None
+        self.ksp = factorise(self.K, self.prefix, "sparse strip corrector", self.ksp)
         self.factorisations += 1
-
-    def _relax_workspace(self) -> None:
-        """Factorise again, MUMPS's workspace relaxation ICNTL(14) doubled up to 1600 %.
-
-        While its estimate falls short (INFOG(1) = −9): numerical pivoting at a stiff contact
-        delays pivots beyond the analysis's estimate (two 3D blocks at h = 1e10 on 2 ranks:
-        20 % fails, 200 % factorises).
-        """
-        relaxation = 20  # MUMPS's default, in percent
-        short = PETSc.PC.FailedReason.FACTOR_OUTMEMORY
-        while self.ksp.getPC().getFailedReason() == short and relaxation < 1600:
-            relaxation *= 2
-            self.ksp.destroy()
-            self.ksp = make_ksp(self.K, self.prefix, DIRECT, setup=False)
-            pc = self.ksp.getPC()
-            pc.setFactorSetUpSolverType()
-            pc.getFactorMatrix().setMumpsIcntl(14, relaxation)
-            self.ksp.setUp()
-        if self.ksp.getPC().getFailedReason() != 0:
-            raise RuntimeError(
-                f"sparse strip corrector: factorisation failed (PETSc reason "
-                f"{self.ksp.getPC().getFailedReason()}, MUMPS workspace relaxed to {relaxation} %)"
-            )
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """``G r`` for concatenated master residuals r (replicated; the result too)."""

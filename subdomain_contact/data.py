@@ -15,8 +15,9 @@ Properties: ``thermal_conductivity`` [W/(m K)], ``electrical_resistivity`` [Ω m
 that temperature), ``stress_free_temperature`` [K], ``density`` [kg/m^3], ``heat_capacity``
 [J/(kg K)]. A contact file holds ``electrical_resistance`` [Ω m^2] and ``thermal_resistance``
 [m^2 K/W], each one number, a table in ``pressure`` [Pa] and ``temperature`` [K]
-(``value[i][j]``), or a power law in the pressure (``scale``, ``hardness``, ``exponent``,
-``floor`` of the conductance), and an optional ``normal`` law (``stiffness`` [Pa/m]).
+(``value[i][j]``), or a power law in the pressure (``scale``, one number or a table in
+``temperature``, ``hardness``, ``exponent``, ``floor`` of the conductance), and an optional
+``normal`` law (``stiffness`` [Pa/m]).
 Tables are interpolated linearly and held at their ends (:class:`~subdomain_contact.laws.Table`).
 """
 
@@ -167,8 +168,14 @@ def _signed(data: dict, key: str, where: str) -> np.ndarray:
 def _contact_law(entry: dict, where: str) -> float | Law:
     """A contact conductance from a resistance entry: number, table in (p, T), power law."""
     if "exponent" in entry:
+        scale = np.asarray(entry["scale"], dtype=float)
+        if scale.ndim:  # α k_harm(T), tabulated in temperature
+            temperature = entry.get("temperature")
+            if temperature is None or len(temperature) != len(scale):
+                raise ValueError(f"{where} scale: needs one temperature per value")
+            scale = Table((0.0,), tuple(map(float, temperature)), [scale.tolist()])
         return PowerLaw(
-            scale=float(entry["scale"]),
+            scale=scale if isinstance(scale, Table) else float(scale),
             hardness=float(entry["hardness"]),
             exponent=float(entry["exponent"]),
             floor=float(entry["floor"]),

@@ -42,37 +42,42 @@ class Constant:
 
 @dataclass(frozen=True)
 class PowerLaw:
-    """``C = floor + scale (p / hardness)^exponent``: conductances of rough contacts.
+    """``C = floor + scale(T) (p / hardness)^exponent``: conductances of rough contacts.
 
-    The Hall–Héroult contact laws are of this type (C = α k (p/H)^β). ``floor`` is what an
-    open contact still conducts (gas, radiation); it must be > 0, or the master layer of an
-    open contact has no equation. Below ``p_min = 1e-9 hardness`` the pressure is held at
-    ``p_min``, so that the derivative stays finite for exponents below one.
+    The Hall–Héroult contact laws are of this type (C = α k_harm(T) (p/H)^β, k_harm the
+    harmonic mean of the two sides' conductivities: Babu et al. 2001, Cincotti et al. 2007).
+    ``floor`` is what an open contact still conducts (gas, radiation); it must be > 0, or the
+    master layer of an open contact has no equation. Below ``p_min = 1e-9 hardness`` the
+    pressure is held at ``p_min``, so that the derivative stays finite for exponents below one.
 
     Attributes:
-        scale: Coefficient at p = hardness, in the law's unit.
+        scale: Coefficient at p = hardness, in the law's unit: a number, or a :class:`Table`
+            in temperature (one pressure) for α k_harm(T).
         hardness: Reference pressure H [Pa].
         exponent: β (dimensionless), > 0.
         floor: Value at zero pressure, in the law's unit.
     """
 
-    scale: float
+    scale: float | Table
     hardness: float
     exponent: float
     floor: float
 
     def __post_init__(self) -> None:
-        check_finite(self.scale, "PowerLaw scale")
+        values = np.ravel(self.scale.values) if isinstance(self.scale, Table) else [self.scale]
+        for value in values:
+            check_finite(float(value), "PowerLaw scale")
+            if value < 0:
+                raise ValueError(f"PowerLaw scale = {value}: must be >= 0")
         check_finite(self.hardness, "PowerLaw hardness", positive=True)
         check_finite(self.exponent, "PowerLaw exponent", positive=True)
         check_finite(self.floor, "PowerLaw floor (value of an open contact)", positive=True)
-        if self.scale < 0:
-            raise ValueError(f"PowerLaw scale = {self.scale}: must be >= 0")
 
     def __call__(self, p: ufl.core.expr.Expr, T: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        """``floor + scale (max(p, p_min) / H)^β``."""
+        """``floor + scale(T) (max(p, p_min) / H)^β``."""
         ratio = ufl.max_value(p / self.hardness, 1e-9)
-        return self.floor + self.scale * ratio**self.exponent
+        scale = self.scale(p, T) if isinstance(self.scale, Table) else self.scale
+        return self.floor + scale * ratio**self.exponent
 
 
 @dataclass(frozen=True)

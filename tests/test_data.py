@@ -63,3 +63,39 @@ def test_a_figure_without_source_or_below_zero_is_refused(tmp_path):
     zero.write_text('[electrical_resistance]\nvalue = 0.0\nsource = "x"\n')
     with pytest.raises(ValueError, match="resistance must be finite, > 0"):
         sc.load_contact(zero)
+
+
+def graphite_resistivity(T):
+    """AT 101 graphite [Ω m]: Cincotti et al. 2007's fit, as MALAMUTE writes it."""
+    return -2.705e-15 * T**3 + 1.263e-11 * T**2 - 1.836e-8 * T + 1.813e-5
+
+
+def test_graphite_tables_are_their_cited_fits():
+    """The stand-in cathode carbon's tables are the cited fits at their nodes (4 digits)."""
+    entries = data.read(DATA / "materials" / "graphite_at101.toml")
+    T = np.asarray(entries["thermal_conductivity"]["temperature"])
+    fits = {
+        "thermal_conductivity": 1.519e-5 * T**2 - 8.007e-2 * T + 130.2,
+        "electrical_resistivity": graphite_resistivity(T),
+        "expansion": 1.996e-6 * np.log(4.799e-2 * T) - 4.041e-6,
+    }
+    for key, fit in fits.items():
+        assert np.array_equal(entries[key]["temperature"], T), key
+        # the file holds the fits rounded to 4-5 significant digits
+        assert np.allclose(entries[key]["value"], fit, rtol=5e-4, atol=0), key
+
+
+def test_carbon_cast_iron_law_gives_the_resistances_it_states():
+    """C_E = 64 σ_harm(T) (p/H)^0.35 (Cincotti et al. 2007): the file's resistances at 900 °C
+    and 0.01, 0.1, 1 MPa (6.34, 2.83, 1.27 µΩ m², its header), from the formula and the two
+    materials' resistivities, against the file's tabulated scale interpolated at 1173.15 K."""
+    law = data.read(DATA / "contacts" / "carbon_cast_iron_pressure.toml")["electrical_resistance"]
+    T = 1173.15
+    sigma = 1 / graphite_resistivity(T), 1 / 0.9e-6  # grey_cast_iron.toml: 0.9 µΩ m
+    harmonic = 2 * sigma[0] * sigma[1] / (sigma[0] + sigma[1])
+    scale = np.interp(T, law["temperature"], law["scale"])
+    assert scale == pytest.approx(64 * harmonic, rel=5e-4)  # 4 digits in the file
+    hardness = 2 * 3.5e9 * 1.92e9 / (3.5e9 + 1.92e9)
+    assert law["hardness"] == pytest.approx(hardness, rel=1e-4)
+    resistances = [1 / (scale * (p / law["hardness"]) ** law["exponent"]) for p in (1e4, 1e5, 1e6)]
+    assert np.allclose(resistances, [6.34e-6, 2.83e-6, 1.27e-6], rtol=5e-3, atol=0)  # 3 digits

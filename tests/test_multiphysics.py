@@ -383,6 +383,18 @@ def test_power_law_values(comm):
     assert evaluate(law, -5e6, 300.0, comm) == pytest.approx(at_zero, rel=1e-13)
 
 
+def test_power_law_with_a_scale_tabulated_in_temperature(comm):
+    """C = floor + α k_harm(T) (p/H)^β: the scale interpolated in T, held beyond the table."""
+    scale = laws.Table((0.0,), (300.0, 1300.0), [[4e3, 3e3]])
+    law = laws.PowerLaw(scale=scale, hardness=2.5e9, exponent=0.35, floor=10.0)
+    for T, s in [(300.0, 4e3), (800.0, 3.5e3), (2000.0, 3e3)]:
+        expected = 10.0 + s * (1e6 / 2.5e9) ** 0.35
+        # a constant integrated over the unit square by quadrature: a few roundings
+        assert evaluate(law, 1e6, T, comm) == pytest.approx(expected, rel=1e-13)
+    with pytest.raises(ValueError, match="scale"):
+        laws.PowerLaw(laws.Table((0.0,), (300.0, 1300.0), [[4e3, -1.0]]), 2.5e9, 0.35, 10.0)
+
+
 @pytest.fixture(scope="module")
 def blocks3d(comm):
     """Two 0.5 × 0.2 × 0.2 m blocks in a row, tetrahedra of about 0.1 m."""
