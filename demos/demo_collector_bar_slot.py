@@ -80,10 +80,10 @@ def say(*text: object) -> None:
 
 
 # Mesh sizes [m] away from the slot and on the contacts: --small (about 17k DOFs) for the
-# tests, the default (about 56k DOFs) for the design study. The 174 mm variant leaves 2 mm of
+# tests, the default (about 65k DOFs) for the design study. The 174 mm variant leaves 2 mm of
 # cast iron above the bar: at 40 mm elements on the contacts Newton does not converge on it
 # (neither route), at 20 mm it does, so --small runs the base case only.
-size, fine = (0.12, 0.04) if args.small else (0.12, 0.02)
+size, fine = (0.12, 0.04) if args.small else (0.06, 0.02)
 size, fine = args.size or size, args.fine or fine
 
 # ## Data
@@ -135,13 +135,19 @@ def problem(scene: sc.Scene, setup: str) -> Problem:
     return Problem(scene, materials, contacts(setup), conditions)
 
 
-def load(bar_height: float) -> sc.Scene:
+def load(bar_height: float, coarsening: float = 1.0) -> sc.Scene:
+    """The scene with a bar of ``bar_height`` [m], every element size times ``coarsening``."""
     return sc.load_scene(
         ROOT / "geo" / "collector_bar_slot.geo",
         bodies=["block", "cast_iron", "bar"],
         interfaces=["slot_side", "slot_top", "bar_side", "bar_top"],
-        parameters={"size": size, "fine": fine, "bar_h": bar_height},
+        parameters={"size": coarsening * size, "fine": coarsening * fine, "bar_h": bar_height},
     )
+
+
+def route(name: str):
+    """Newton's linear solver: ``"subdomain"`` or ``"monolithic"``."""
+    return sc.Subdomains() if name == "subdomain" else sc.Monolithic()
 
 
 def read(system: sc.System, result: sc.Result) -> dict:
@@ -186,6 +192,8 @@ def read(system: sc.System, result: sc.Result) -> dict:
         "distributions": distributions,
         "dofs": system.num_dofs(),
         "newton_iterations": result.iterations,
+        "line_search": result.line_search,
+        "newton_steps_shortened": result.shortened,
         "inner_rounds": [s.inner_rounds for s in result.history[1:]],
         "residuals": result.relative_residuals().tolist(),
         "factorisations": result.factorisations,
@@ -206,18 +214,13 @@ def stats(values: np.ndarray, area: np.ndarray) -> dict:
 
 # ## Runs
 #
-# The constant setup by Newton from a uniform temperature (see START), the subdomain
-# iteration inside, and the monolithic Newton on the same discrete problem. The pressure setup
-# starts from the constant setup's solution: from the cold start its iterates open contacts
-# that the solution closes, the current forced across them heats the iterates without bound,
-# and Newton fails on both routes (a continuation that Newton should make itself: issue 16).
-# Then the design variant, a bar of 174 mm (2 mm of cast iron above it) in the same slot.
-# From a uniform 300 K, the constant setup converges on the monolithic route (24 Newton steps)
-# but not on the subdomain one: the iterates heat without bound on one route and not on the
-# other, a globalisation that Newton lacks (issue 16). From the metal pad's temperature both
-# routes converge in 14 steps at --small; at the default size the subdomain route still
-# diverges (issue 16).
-START = BATH  # K, the uniform initial temperature
+# Each setup by Newton from a cold start, a uniform temperature of 300 K, with the default
+# settings: the subdomain iteration inside, then the monolithic Newton on the same discrete
+# problem. Newton's steps are limited to 100 K of temperature change
+# (`sc.newton.MAX_TEMPERATURE_STEP`): full steps from the cold state diverge on both routes,
+# the iterates heating without bound. Then the design variant, a bar of 174 mm (2 mm of cast
+# iron above it) in the same slot.
+START = 300.0  # K, the uniform initial temperature
 runs: dict = {}
 states: dict = {}
 faces: dict = {}
@@ -228,22 +231,19 @@ for bar_height in HEIGHTS:
         system = sc.System(problem(scene, setup))
         linears = args.linear if bar_height == 0.16 else args.linear[:1]
         for linear in linears:
-            solver = sc.Subdomains() if linear == "subdomain" else sc.Monolithic()
-            if setup == "constant":
-                system.reset({"temperature": START})
-            else:  # a continuation in the contact law: from the constant setup's solution
-                system.set_state(states[f"constant, bar {1e3 * bar_height:.0f} mm, {linear}"])
+            solver = route(linear)
+            system.reset({"temperature": START})
             tic = time.perf_counter()
             result = sc.solve(system, solver, rtol=1e-10)
             key = f"{setup}, bar {1e3 * bar_height:.0f} mm, {linear}"
             runs[key] = read(system, result) | {"wall_seconds": time.perf_counter() - tic}
             states[key] = system.state()
             say(
-                f"{key}: {result.iterations} Newton steps, {runs[key]['wall_seconds']:.1f} s, "
-                f"voltage drop {runs[key]['voltage_drop_mV']:.1f} mV"
+                f"{key}: {result.iterations} Newton steps ({result.line_search}), "
+                f"{runs[key]['wall_seconds']:.1f} s, voltage drop "
+                f"{runs[key]['voltage_drop_mV']:.2f} mV"
             )
-            if hasattr(solver, "destroy"):
-                solver.destroy()
+            solver.destroy()
         if bar_height == 0.16:
             faces[setup] = sc.contact_fields(system)
             sc.write_vtk(args.out / setup, system)
@@ -269,6 +269,40 @@ for setup in ("constant", "pressure") if len(HEIGHTS) == 2 else ():
     }
     say(f"{setup}: voltage drop {base['voltage_drop_mV']:.2f} mV (160 mm) -> "
         f"{variant['voltage_drop_mV']:.2f} mV (174 mm)")  # fmt: skip
+
+# ## Mesh convergence of the voltage drop
+#
+# The base case on meshes 2 and 4 times coarser than the run's (every element size scaled), by
+# the first route. With the run's own mesh that gives three levels, the observed order
+# p = log₂((V₄ − V₂)/(V₂ − V₁)) of the voltage drop and its Richardson extrapolation
+# V₁ + (V₁ − V₂)/(2^p − 1). (--small: 2 times coarser only, no order.)
+convergence = {}
+for setup in ("constant", "pressure"):
+    levels = []
+    for coarsening in (2.0,) if args.small else (4.0, 2.0):
+        with sc.System(problem(load(0.16, coarsening), setup)) as system:
+            solver = route(args.linear[0])
+            system.reset({"temperature": START})
+            result = sc.solve(system, solver, rtol=1e-10)
+            drop = 1e3 * sc.voltage_drop(system, "top", "bar_end")
+            levels.append((coarsening, sum(system.num_dofs().values()), drop, result.iterations))
+            solver.destroy()
+    own = runs[f"{setup}, bar 160 mm, {args.linear[0]}"]
+    dofs = sum(own["dofs"].values())
+    levels.append((1.0, dofs, own["voltage_drop_mV"], own["newton_iterations"]))
+    entry = {
+        name: [level[i] for level in levels]
+        for i, name in enumerate(["coarsening", "dofs", "voltage drop [mV]", "newton_iterations"])
+    }
+    if len(levels) == 3:
+        v4, v2, v1 = entry["voltage drop [mV]"]
+        order = float(np.log2((v4 - v2) / (v2 - v1))) if (v4 - v2) * (v2 - v1) > 0 else None
+        entry["observed order"] = order
+        if order is not None:
+            entry["extrapolated [mV]"] = v1 + (v1 - v2) / (2**order - 1)
+    convergence[setup] = entry
+    say(f"{setup}: voltage drop by mesh {entry['voltage drop [mV]']}, order "
+        f"{entry.get('observed order')}")  # fmt: skip
 
 # ## Current density and pressure on the slot's faces (pressure-dependent setup)
 if comm.rank == 0:
@@ -298,11 +332,12 @@ if comm.rank == 0:
             "lining (convection to 323.15 K)": LINING,
             "symmetry": "u_x = 0 on x = 0, u_y = 0 on y = 0; u_z = 0 on z = 0",
             "slip spring [Pa/m]": SLIP,
-            "start": f"constant setup: uniform {START} K; pressure setup: its solution",
+            "start": f"uniform {START} K (both setups, both routes)",
         },
         "current_A": CURRENT,
         "runs": runs,
         "design_study": study,
+        "mesh_convergence": convergence,
         "seconds": time.perf_counter() - started,
     }
     (args.out / "report.json").write_text(json.dumps(report, indent=1, default=float))

@@ -28,7 +28,13 @@ from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
 from subdomain_contact.monolithic import BDDC, CG_GAMG, Monolithic
-from subdomain_contact.newton import NewtonConvergenceError, NewtonStep, Result, solve
+from subdomain_contact.newton import (
+    MAX_TEMPERATURE_STEP,
+    NewtonConvergenceError,
+    NewtonStep,
+    Result,
+    solve,
+)
 from subdomain_contact.physics import (
     Contact,
     Convection,
@@ -69,6 +75,7 @@ __all__ = [
     "BDDC",
     "CG_GAMG",
     "DIRECT",
+    "MAX_TEMPERATURE_STEP",
     "Contact",
     "Convection",
     "CurrentDensity",

@@ -295,6 +295,17 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
             bar = through["bar_side"] + through["bar_top"]
             assert abs(carbon) == pytest.approx(abs(total), rel=1e-8)
             assert abs(bar) == pytest.approx(abs(total), rel=1e-8)
+            # from the cold start (300 K), with the default settings: full steps diverge, steps
+            # limited to 100 K of temperature converge, so the hottest node's climb alone takes
+            # ceil((T_max − 300 K) / 100 K) steps (10: T_max ≈ 1224 K)
+            assert run["line_search"] == "limited" and run["newton_steps_shortened"] > 0
+            climb = np.ceil((max(run["max_temperature_K"].values()) - 300.0) / 100.0)
+            assert run["newton_iterations"] >= climb >= 10
+        # the mesh study's coarser level converged from the cold start too
+        coarse = report["mesh_convergence"][setup]
+        assert coarse["coarsening"] == [2.0, 1.0]
+        assert coarse["dofs"][0] < coarse["dofs"][1] / 2  # a coarser mesh
+    assert report["boundary_conditions"]["start"].startswith("uniform 300.0 K")
     assert (out / "slot_faces.png").stat().st_size > 10_000
     assert (out / "constant").is_dir() and (out / "pressure").is_dir()  # the VTK
     assert report["ranks"] == comm.size

@@ -1,6 +1,7 @@
 """Thermo-electro-mechanical contact: closed forms, the monolithic Newton, laws and errors."""
 
 import dataclasses
+import itertools
 
 import dolfinx
 import numpy as np
@@ -122,6 +123,43 @@ def test_joule_bars_match_the_closed_form(bars, comm):
     assert result.iterations <= 3
     # the exact corrector solves each linear system in one correction, then checks it
     assert all(step.inner_rounds == 2 for step in result.history[1:])
+
+
+@pytest.mark.parametrize("linear", sorted(LINEAR))
+def test_newton_steps_are_limited_in_temperature(bars, comm, linear):
+    # 3 V across the bars: Joule heat lifts them to 1002 K; the full Newton takes 3 steps
+    system = make_system(joule_problem(bars, voltage=3.0))
+    system.reset({"temperature": 300.0})
+    iterates = []
+
+    def keep(iteration):
+        local = [system.bodies[n].nodal("temperature")[1].copy() for n in sorted(system.bodies)]
+        iterates.append(local)
+
+    result = sc.solve(system, LINEAR[linear](), rtol=1e-12, line_search="limited", monitor=keep)
+    moves = [
+        comm.allreduce(
+            max(np.max(np.abs(b - a), initial=0.0) for a, b in zip(*pair, strict=True)), MPI.MAX
+        )
+        for pair in itertools.pairwise(iterates)
+    ]
+    # no node moves more than the limit in one step (round-off of the scaled step: 1e-9 K)
+    assert max(moves) <= sc.MAX_TEMPERATURE_STEP + 1e-9
+    exact = JouleBars(0.5, 0.5, 10.0, 50.0, 1e4, 3e4, 2e3, 5e4, 3.0, 300.0, 320.0)
+    nodes = np.linspace(0.0, 0.5, 5)  # the bars' nodes along x (4 elements each)
+    hottest = max(
+        exact.thermal.temperature_a(nodes).max(), exact.thermal.temperature_b(0.5 + nodes).max()
+    )
+    rise = hottest - 300.0
+    # so climbing 702 K from the uniform 300 K takes at least ceil(rise / 100) = 8 steps, all
+    # but the last shortened (the unlimited Newton: 3 steps)
+    climb = int(np.ceil(rise / sc.MAX_TEMPERATURE_STEP))
+    assert result.iterations >= climb == 8
+    assert result.shortened >= climb - 1
+    assert moves[-1] < sc.MAX_TEMPERATURE_STEP  # the last steps are Newton's own, unshortened
+    temperature = {"plate_A": exact.thermal.temperature_a, "plate_B": exact.thermal.temperature_b}
+    # the same root as the full Newton: nodally exact, 1e-10 as in the test above
+    assert max_nodal_error(system, temperature, "temperature", comm) < 1e-10
 
 
 def expansion_problem(scene, temperature, *, gap=1e-4):
