@@ -27,7 +27,7 @@ import numpy.typing as npt
 from petsc4py import PETSc
 
 from subdomain_contact.body import Body
-from subdomain_contact.merged import Layout, merged_matrix
+from subdomain_contact.merged import Layout, merged_matrix, same_pattern
 from subdomain_contact.solvers import destroy, factorise
 from subdomain_contact.system import System
 
@@ -218,13 +218,14 @@ class StripSolve:
         whole = merged_matrix(system)
         K = whole.createSubMatrix(self.rows, self.rows)
         whole.destroy()
-        if self.K is not None and K.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
+        if self.K is not None and same_pattern(K, self.K):
             K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
             K.destroy()
         else:  # the first, or contacts changed the pattern
             destroy(self.K, self.ksp)
             self.K, self.ksp = K, None
-        self.ksp = factorise(self.K, self.prefix, "sparse strip corrector", self.ksp)
+        ksp, self.ksp = self.ksp, None  # a failed factorisation is destroyed by factorise
+        self.ksp = factorise(self.K, self.prefix, "sparse strip corrector", ksp)
         self.factorisations += 1
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -18,7 +18,7 @@ from petsc4py import PETSc
 from subdomain_contact.solvers import destroy
 from subdomain_contact.system import System
 
-__all__ = ["Layout", "merged_matrix", "unassembled_matrix"]
+__all__ = ["Layout", "merged_matrix", "same_pattern", "unassembled_matrix"]
 
 
 class Layout:
@@ -68,23 +68,22 @@ def _body_entries(system: System, layout: Layout, name: str) -> tuple[list[Entri
         B = blocks["BP"][free].tocoo()
         rows.append((kept[free][B.row], at + B.col, B.data))
         if body.comm.rank == 0:
-            C = -blocks["L"][body.position[k]]
-            if "CtP" in blocks:
-                C = C + blocks["CtP"]
-            C = C.tocoo()
-            masters.append((at + C.row, kept[C.col], C.data))
+            # the parts' entries side by side, summed when the matrix is made: a sparse sum
+            # here would drop the entries that happen to cancel or vanish at this state
+            # (scipy keeps no computed zeros), and the pattern would change with the state
+            at_k = body.position[k]
+            for C in [-blocks["L"][at_k]] + ([blocks["CtP"]] if "CtP" in blocks else []):
+                C = C.tocoo()
+                masters.append((at + C.row, kept[C.col], C.data))
             # P_kᵀ D_k P_k, sparse (the half-link's mass-like block), its stored pattern
             # whole; an inactive master row and column hold 1/2 on the diagonal alone
-            D = -blocks["BP"][body.position[k]]
-            if "DtP" in blocks:
-                D = D + blocks["DtP"]
-            D = D.tocoo()
             active = system.active[k]
-            both = active[D.row] & active[D.col]
+            for D in [-blocks["BP"][at_k]] + ([blocks["DtP"]] if "DtP" in blocks else []):
+                D = D.tocoo()
+                both = active[D.row] & active[D.col]
+                masters.append((at + D.row[both], at + D.col[both], D.data[both]))
             idle = np.flatnonzero(~active)
-            masters.append((at + np.concatenate([D.row[both], idle]),
-                            at + np.concatenate([D.col[both], idle]),
-                            np.concatenate([D.data[both], np.full(idle.size, 0.5)])))  # fmt: skip
+            masters.append((at + idle, at + idle, np.full(idle.size, 0.5)))
     return rows, masters
 
 
@@ -132,6 +131,20 @@ def merged_matrix(system: System) -> PETSc.Mat:
     r, c, v = _concatenate(rows)
     n = (system.local_size, PETSc.DETERMINE)
     return _aij(r - layout.mine, c, v, (system.local_size, layout.size), (n, n), comm)
+
+
+def same_pattern(A: PETSc.Mat, B: PETSc.Mat) -> bool:
+    """Whether two AIJ matrices store the same entries (collective).
+
+    The count of stored entries is not enough: a contact that opens here and closes there
+    may drop as many entries as it adds, and a factorisation reused on such a pattern solves
+    another matrix.
+    """
+    if A.getSize() != B.getSize() or A.getOwnershipRange() != B.getOwnershipRange():
+        return False
+    a, b = A.getValuesCSR(), B.getValuesCSR()
+    same = bool(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]))
+    return bool(A.getComm().tompi4py().allreduce(same, op=MPI.LAND))
 
 
 def unassembled_matrix(system: System) -> PETSc.Mat:

@@ -19,7 +19,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.merged import merged_matrix, unassembled_matrix
+from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
@@ -106,7 +106,8 @@ class Monolithic:
         if bddc:  # a new preconditioner for every new matrix
             self.destroy()
         merged = unassembled_matrix(system) if bddc else merged_matrix(system)
-        if self.K is not None and merged.getInfo()["nz_used"] == self.K.getInfo()["nz_used"]:
+        failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0
+        if self.K is not None and not failed and same_pattern(merged, self.K):
             # the same sparsity (a new Newton step): MUMPS keeps its analysis
             merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             merged.destroy()

@@ -262,13 +262,17 @@ class Subdomains:
         out = np.zeros(system.local_size)
         local = {k: np.zeros(n) for k, n in system.sizes.items()}
         pushed = {k: np.zeros(len(layer.channels)) for k, layer in system.layers.items()}
-        for name, body in system.bodies.items():
-            rhs = None if b is None else b[system.slices[name]]
-            y, shares = body.round(rhs, {k: increments[k] for k in body.layers})
-            out[system.slices[name]] = y
-            for k, r in shares.items():
-                local[k] += r
-                pushed[k] += self._channel_norms(k, r)
+
+        def solve_bodies() -> None:
+            for name, body in system.bodies.items():
+                rhs = None if b is None else b[system.slices[name]]
+                y, shares = body.round(rhs, {k: increments[k] for k in body.layers})
+                out[system.slices[name]] = y
+                for k, r in shares.items():
+                    local[k] += r
+                    pushed[k] += self._channel_norms(k, r)
+
+        together(system.comm, solve_bodies)
         totals, pushed = system.total(local), system.total(pushed)
         given = system.split_masters(b[system.master_slice]) if b is not None else None
         for k in totals:
@@ -392,17 +396,21 @@ class Subdomains:
         """``S v`` for concatenated master increments v (identity on inactive DOFs)."""
         system, parts = self.system, self.split(v)
         local = {k: np.zeros(s.stop - s.start) for k, s in self.slices.items()}
-        for name, body in system.bodies.items():
-            own = list(body.layers)
-            if name in self.dense:
-                response = self.dense[name] @ np.concatenate([parts[k] for k in own])
-                for k, at in body.master_slices().items():
-                    local[k] += response[at]
-            else:
-                columns = {k: parts[k][:, None] for k in own}
-                for k, r in body.respond(columns).items():
-                    local[k] += r[:, 0]
-                self._applications += 1
+
+        def respond() -> None:
+            for name, body in system.bodies.items():
+                own = list(body.layers)
+                if name in self.dense:
+                    response = self.dense[name] @ np.concatenate([parts[k] for k in own])
+                    for k, at in body.master_slices().items():
+                        local[k] += response[at]
+                else:
+                    columns = {k: parts[k][:, None] for k in own}
+                    for k, r in body.respond(columns).items():
+                        local[k] += r[:, 0]
+                    self._applications += 1
+
+        together(system.comm, respond)
         total = system.total(local)
         out = np.concatenate([total[k] for k in self.slices])
         return np.where(self.active, out, v)
@@ -595,6 +603,25 @@ class _Preconditioner:
         full = np.concatenate(x.getComm().tompi4py().allgather(x.getArray(readonly=True)))
         start, end = x.getOwnershipRange()
         y.setArray(self.solver.precondition(full / self.weights)[start:end])
+
+
+def together(comm: MPI.Comm, work: Callable[[], None]) -> None:
+    """Run this rank's part of a collective step; if it fails on any rank, fail on every one.
+
+    A body on a rank group fails there alone (an iterative solve that stops short); the other
+    ranks would wait for it in the next collective call. Here they raise too, with its
+    message, so that Newton's next line search or the caller sees one failure everywhere.
+    """
+    error: Exception | None = None
+    try:
+        work()
+    except Exception as failure:
+        error = failure
+    messages = [m for m in comm.allgather(None if error is None else str(error)) if m]
+    if error is not None:
+        raise error
+    if messages:
+        raise RuntimeError(f"on another rank: {messages[0]}")
 
 
 def _default_option(name: str, value: str) -> bool:

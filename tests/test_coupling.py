@@ -4,9 +4,12 @@ that converge from a cold start, kept factorisations, modified Newton, rank grou
 import pytest
 from helpers import make_system, preconditioned_condition
 from mpi4py import MPI
+from petsc4py import PETSc
 
 import subdomain_contact as sc
 from subdomain_contact import body as body_module
+from subdomain_contact.merged import merged_matrix, same_pattern
+from subdomain_contact.solvers import destroy
 from verification.cases import (
     bars_scene,
     blocks_row_scene,
@@ -212,6 +215,38 @@ def test_a_linear_bulk_is_factorised_once(comm):
         worst = max(worst, error_against(system, reference.at(spaces), field, component))
     # both at rtol 1e-12: measured 1.1e-15 of the range apart, on 1 and on 2 ranks
     assert worst < 1e-8
+
+
+def test_the_merged_matrix_keeps_its_pattern_from_state_to_state(comm):
+    """A factorisation is reused on the same stored entries: they must not follow the state.
+
+    At the cold state (φ = 0) the contact's Joule heat and its derivatives vanish; at the
+    solution they do not. A sparse sum of the link's parts dropped the entries that vanished,
+    and the count of entries could then stay while the pattern changed: the collector bar
+    slot (65k DOFs) factorised a matrix on another's analysis and Newton's step was 1e9 m.
+    """
+    system = make_system(squeezed_joule_bars(bars_scene(8, 2, comm=comm)))
+    system.reset({"temperature": 300.0})
+    system.assemble_jacobian()
+    cold = merged_matrix(system)
+    sc.solve(system, sc.Monolithic(), rtol=1e-10)
+    system.assemble_jacobian()
+    warm = merged_matrix(system)
+    assert same_pattern(cold, warm)
+    cold.axpy(-1.0, warm)
+    assert cold.norm() > 1e-3 * warm.norm()  # the values did change
+    destroy(cold, warm)
+
+
+def test_a_pattern_is_its_entries_not_their_count():
+    def matrix(columns):  # 2 × 2, one stored entry per row
+        csr = ([0, 1, 2], columns, [1.0, 1.0])
+        return PETSc.Mat().createAIJ(size=(2, 2), csr=csr, comm=MPI.COMM_SELF)
+
+    a, b, c = matrix([0, 1]), matrix([1, 1]), matrix([0, 1])
+    assert not same_pattern(a, b)
+    assert same_pattern(a, c)
+    destroy(a, b, c)
 
 
 def test_a_nonlinear_bulk_is_factorised_every_step(comm):
