@@ -108,10 +108,13 @@ LINING = {  # W/(m² K): each face's lining as a heat-transfer coefficient (this
 }
 SLIP = 1e7  # Pa/m: the spring against slip (1e-6 of the normal stiffness)
 
-materials = {
-    "block": sc.load_material(DATA / "materials" / "graphite_at101.toml"),  # see the file
-    "cast_iron": sc.load_material(DATA / "materials" / "grey_cast_iron.toml"),
-    "bar": sc.load_material(DATA / "materials" / "collector_bar_steel.toml"),
+materials = {  # steady: no heat storage
+    name: sc.load_material(DATA / "materials" / f"{file}.toml", storage=False)
+    for name, file in (
+        ("block", "graphite_at101"),  # see the file
+        ("cast_iron", "grey_cast_iron"),
+        ("bar", "collector_bar_steel"),
+    )
 }
 
 
@@ -201,6 +204,10 @@ def read(system: sc.System, result: sc.Result) -> dict:
         "newton_steps_shortened": result.shortened,
         "inner_rounds": [s.inner_rounds for s in result.history[1:]],
         "residuals": result.relative_residuals().tolist(),
+        # each field's residual 2-norm [W, A, N] where Newton stopped, and its scale: what
+        # bounds the balances (a balance's imbalance sums that field's residual entries)
+        "final_residual": dict(result.history[-1].fields),
+        "newton_scale": dict(result.scale),
         "factorisations": result.factorisations,
         "seconds": result.seconds,
     }

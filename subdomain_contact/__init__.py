@@ -52,6 +52,7 @@ from subdomain_contact.physics import (
 from subdomain_contact.readback import (
     average,
     balance,
+    bulk_heat,
     contact_fields,
     current,
     force,
@@ -110,6 +111,7 @@ __all__ = [
     "Tolerance",
     "average",
     "balance",
+    "bulk_heat",
     "contact_fields",
     "current",
     "force",

@@ -52,7 +52,11 @@ def read(path: str | Path) -> dict[str, Any]:
 
 
 def load_material(
-    path: str | Path, *, stress_free_temperature: float | None = None, fields: str = "TEu"
+    path: str | Path,
+    *,
+    stress_free_temperature: float | None = None,
+    fields: str = "TEu",
+    storage: bool = True,
 ) -> Material:
     """A :class:`Material` from a data file.
 
@@ -62,6 +66,8 @@ def load_material(
             ``stress_free_temperature``.
         fields: Which fields the material takes part in: ``T`` (temperature), ``E``
             (potential), ``u`` (displacement).
+        storage: Read ``density`` and ``heat_capacity`` (heat storage, for a transient) when
+            the file has them; False for a steady problem (no storage form to assemble).
 
     Raises:
         ValueError: A property missing for a requested field, a bad table, or a negative
@@ -71,7 +77,7 @@ def load_material(
     kwargs: dict[str, Any] = {}
     if "T" in fields:
         kwargs["conductivity"] = _law(data, "thermal_conductivity", where)
-        if "density" in data and "heat_capacity" in data:
+        if storage and "density" in data and "heat_capacity" in data:
             kwargs["density"] = float(_scalar(data, "density", where))
             kwargs["heat_capacity"] = _law(data, "heat_capacity", where)
     if "E" in fields:

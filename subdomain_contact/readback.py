@@ -35,6 +35,7 @@ from subdomain_contact.system import System
 __all__ = [
     "average",
     "balance",
+    "bulk_heat",
     "contact_fields",
     "current",
     "force",
@@ -472,6 +473,23 @@ def _generated(system: System) -> float:
         local = -sum(_assembled(f)[dofs].sum() for f in forms if f is not None)
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM)
+
+
+def bulk_heat(system: System) -> dict[str, float]:
+    """Heat [W] generated in each body's bulk: its Joule heat σ|∇φ|² and volume sources.
+
+    The contacts' Joule heat is not in it (:func:`summary`, per interface). Every body, on
+    every rank.
+    """
+    if "temperature" not in system.problem.fields:
+        raise ValueError("bulk_heat: the scene has no temperature field")
+    local = dict.fromkeys(system.problem.scene.bodies, 0.0)
+    for name, body in system.bodies.items():
+        if body.forms.sources is None:
+            continue
+        part = -_assembled(body.forms.sources)[_dofs(body, "temperature", None)].sum()
+        local[name] = _once(system, body.comm.allreduce(part, op=MPI.SUM))
+    return {name: system.comm.allreduce(value, op=MPI.SUM) for name, value in local.items()}
 
 
 def _stored(system: System) -> float:

@@ -1,0 +1,460 @@
+# # Coke bed preheating of a Hall–Héroult cell: a 2D slice along one cathode block, in time
+#
+# Before a new cell is started, the line current is passed through a thin bed of coke grains
+# laid between the anodes and the cathode blocks. The bed and its contacts heat by Joule effect
+# until the cathode surface is hot enough to pour the bath; too fast or too uneven and the
+# blocks crack. This demo follows that preheat from a cold cell to a stated end point (the
+# mean cathode surface temperature reaching 900 °C, or a time limit) and reports what a preheat
+# engineer reads: the cathode surface temperature (mean, min, max), the largest temperature
+# gradient in the block, the cell voltage and power, where the power is dissipated (coke bed,
+# its contacts, the carbon), and the energy balance of the whole run.
+#
+# ## The model
+#
+# `geo/preheat_slice.geo`: half a cell's width along one cathode block, from the centre line to
+# the shell, through the collector bar's middle plane. Six bodies (anode, coke bed, cathode
+# block, cast iron, collector bar, ramming paste), seven contacts, temperature T and potential
+# φ in each (thermo-electric; the mechanics of the slice are not coupled yet: contact
+# pressures are the loads stated below). A 2D slice of bodies of different widths out of its
+# plane: each body's equations are those of its real width (the block's 0.48 m; the slot's
+# 0.2 m for the cast iron, the bar's 0.16 m), i.e. its conductivities and heat capacity are
+# multiplied by that width, and each contact's conductances by the width it touches across
+# (the slot's three faces, the bar's three faces). Every integral is then the slice's own
+# (W, A), and the current through the half slice is half a block's: 300 kA / 28 / 2.
+#
+# Materials and contact laws are data files under `data/` with their sources; the default
+# schedule (`data/preheat_schedule.csv`) ramps the line current from 20 % to 100 % in 24 h,
+# then holds it. Boundary conditions, this model's choices (documented in `report.json`):
+# convection to 323 K through the cover above the anodes, the lining below, the ramming
+# paste's side and top and the bar out of the shell; the centre line is a symmetry plane;
+# φ = 0 at the bar's end; the current enters the anodes through their stubs.
+#
+# Run `python demos/demo_preheat.py` (`--small`: a coarse mesh and the first hours, for the
+# tests; `--coke 0.03`: a thicker bed; `--restart`: go on from the latest checkpoint;
+# `--no-study`: the base case only, not the 30 mm bed).
+
+import argparse
+import csv
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+
+# isort: split
+import dolfinx
+import matplotlib
+import ufl
+from mpi4py import MPI
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+import subdomain_contact as sc
+from subdomain_contact.physics import Convection, CurrentDensity, Potential, Problem
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "data"
+HOUR = 3600.0
+parser = argparse.ArgumentParser(description=__doc__)
+parser.add_argument("--small", action="store_true", help="a coarse mesh and the first hours")
+parser.add_argument("--out", type=Path, default=Path("out_preheat"))
+parser.add_argument("--quiet", action="store_true", help="no progress line")
+parser.add_argument("--restart", action="store_true", help="go on from the latest checkpoint")
+parser.add_argument("--coke", type=float, default=0.02, help="coke bed thickness [m]")
+parser.add_argument(
+    "--schedule", type=Path, default=DATA / "preheat_schedule.csv", help="line current CSV"
+)
+parser.add_argument("--target", type=float, default=1173.15, help="end point: mean T [K]")
+parser.add_argument("--hours", type=float, help="time limit [h] (default 120; --small 6)")
+parser.add_argument("--tolerance", type=float, default=2.0, help="local error per step [K]")
+parser.add_argument("--no-study", action="store_true", help="the base case only")
+args = parser.parse_args()
+comm = MPI.COMM_WORLD
+started = time.perf_counter()
+
+
+def say(*text: object) -> None:
+    if comm.rank == 0 and not args.quiet:
+        print(*text, flush=True)
+
+
+size, fine = (0.16, 0.04) if args.small else (0.04, 0.01)
+limit = HOUR * (args.hours or (6.0 if args.small else 120.0))
+
+# ## Data
+#
+# 300 kA line current, 28 cathode blocks (Dupuis 2011, as the slot scene): the half slice
+# carries half a block's current at full line current.
+LINE_CURRENT = 300e3  # A
+SLICE_CURRENT = LINE_CURRENT / 28 / 2  # A
+BLOCK_WIDTH = 0.48  # m, out of the slice's plane (Dupuis 2011)
+WIDTH = {  # m: each body's width out of the plane
+    "anode": BLOCK_WIDTH,  # the slice cuts a block-wide strip of the anodes above
+    "coke": BLOCK_WIDTH,
+    "block": BLOCK_WIDTH,
+    "cast_iron": 0.2,  # the slot's mean width (Dupuis 2011)
+    "bar": 0.16,  # the bar (Dupuis 2011)
+    "paste": BLOCK_WIDTH,
+}
+SLOT_H, BAR = 0.176, 0.16  # m
+STUBS = 3 * 0.18  # m of anode top under the stubs (geo/preheat_slice.geo)
+AMBIENT = 323.15  # K (this model's choice, as the slot scene)
+START = AMBIENT  # K, the cold cell
+LOSSES = {  # W/(m² K) of real surface: this model's choices, see the report
+    "anode_cover": 3.0,  # 0.1 m of alumina/crushed bath cover, k ≈ 0.3 W/(m K)
+    "anode_sides": 3.0,  # the channels, covered as the anodes' tops
+    "coke_sides": 3.0,
+    "block_top": 3.0,  # the block between and beyond the anodes, under the cover
+    "bottom": 2.0,  # the lining: 0.4 m of refractory and insulation, k ≈ 0.8 W/(m K)
+    "paste_top": 3.0,  # the side ledge, covered
+    "sidewall": 5.0,  # side lining and shell
+    "bar_surface": 10.0,  # the bar through the lining and the shell
+    "bar_end": 50.0,  # the bar's end, to the flexible and the busbar
+}
+LOSS_BODY = {  # the body each loss group belongs to (for its width)
+    "anode_cover": "anode",
+    "anode_sides": "anode",
+    "coke_sides": "coke",
+    "block_top": "block",
+    "bottom": "bar",
+    "paste_top": "paste",
+    "sidewall": "paste",
+    "bar_surface": "bar",
+    "bar_end": "bar",
+}
+ANODE_PRESSURE = 1560.0 * 9.81 * 0.6  # Pa: an anode's weight on the bed, ρ g h (9.2 kPa)
+
+
+def widened(value, width: float):
+    """A property (number or law (p, T)) of a slice of ``width`` [m] out of the plane."""
+    if callable(value):
+        return lambda p, T: width * value(p, T)
+    return width * float(value)
+
+
+def material(path: Path, width: float) -> sc.Material:
+    """The thermo-electric part of a data file, for a body ``width`` [m] wide."""
+    m = sc.load_material(path, fields="TE")
+    return replace(
+        m,
+        conductivity=widened(m.conductivity, width),
+        electrical_conductivity=widened(m.electrical_conductivity, width),
+        density=width * m.density,
+    )
+
+
+def contact(path: Path, width: float, pressure: float = 0.0) -> sc.Contact:
+    """A contact of a data file, across ``width`` [m], at the stated ``pressure`` [Pa]."""
+    c = sc.load_contact(path)
+    return replace(
+        c,
+        conductance=widened(c.conductance, width),
+        electrical_conductance=widened(c.electrical_conductance, width),
+        normal=None,
+        pressure=pressure,
+    )
+
+
+def slot_contact() -> sc.Contact:
+    """Cast iron / carbon over the slot's three faces: two sides (4 µΩ m²) and the top (8)."""
+    folder = DATA / "contacts"
+    side = sc.load_contact(folder / "carbon_cast_iron_vertical_constant.toml")
+    top = sc.load_contact(folder / "carbon_cast_iron_horizontal_constant.toml")
+    sides, across = 2 * SLOT_H, WIDTH["cast_iron"]  # m of slot face per m of slot
+
+    def both(a, b):
+        a, b = sc.laws.as_law(a), sc.laws.as_law(b)
+        return lambda p, T: sides * a(p, T) + across * b(p, T)
+
+    return sc.Contact(
+        conductance=both(side.conductance, top.conductance),
+        electrical_conductance=both(side.electrical_conductance, top.electrical_conductance),
+    )
+
+
+BODIES = ["anode", "coke", "block", "cast_iron", "bar", "paste"]
+INTERFACES = [
+    "anode_coke",
+    "coke_block",
+    "slot_top",
+    "bar_top",
+    "block_paste",
+    "iron_paste",
+    "bar_paste",
+]
+BAR_PRESSURE = 0.1e6  # Pa: the bar/cast iron contact's pressure, this model's assumption
+
+
+def schedule(path: Path) -> sc.Schedule:
+    """The line current's share against time, from the CSV (hours, share)."""
+    with path.open() as f:
+        rows = [r for r in csv.reader(line for line in f if not line.startswith("#"))][1:]
+    hours, share = np.array(rows, dtype=float).T
+    return sc.Schedule(tuple(hours * HOUR), tuple(share * SLICE_CURRENT / STUBS))
+
+
+def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
+    folder, contacts_ = DATA / "materials", DATA / "contacts"
+    files = {
+        "anode": "anode_carbon",
+        "coke": "coke_bed",
+        "block": "graphite_at101",  # the graphitized block's stand-in (see the file)
+        "cast_iron": "grey_cast_iron",
+        "bar": "collector_bar_steel",
+        "paste": "ramming_paste",
+    }
+    materials = {b: material(folder / f"{f}.toml", WIDTH[b]) for b, f in files.items()}
+    bed = contacts_ / "coke_bed_carbon.toml"
+    paste = contacts_ / "ramming_paste_bonded.toml"
+    contacts = {
+        "anode_coke": contact(bed, BLOCK_WIDTH, ANODE_PRESSURE),
+        "coke_block": contact(bed, BLOCK_WIDTH, ANODE_PRESSURE),
+        "slot_top": slot_contact(),
+        # the bar's top and two sides, at an assumed pressure
+        "bar_top": contact(contacts_ / "steel_cast_iron.toml", 3 * BAR, BAR_PRESSURE),
+        "block_paste": contact(paste, BLOCK_WIDTH),
+        "iron_paste": contact(paste, WIDTH["cast_iron"]),
+        "bar_paste": contact(paste, 3 * BAR),
+    }
+    conditions = [CurrentDensity("stubs", current), Potential("bar_end", 0.0)] + [
+        Convection(g, h * WIDTH[LOSS_BODY[g]], AMBIENT) for g, h in LOSSES.items()
+    ]
+    return Problem(scene, materials, contacts, conditions)
+
+
+def load(coke: float) -> sc.Scene:
+    return sc.load_scene(
+        ROOT / "geo" / "preheat_slice.geo",
+        bodies=BODIES,
+        interfaces=INTERFACES,
+        parameters={"size": size, "fine": fine, "coke": coke},
+    )
+
+
+# ## What is read at every step
+class Probes:
+    """The cathode surface, the block's gradient, the voltage, the power and where it goes."""
+
+    def __init__(self, system: sc.System, current: sc.Schedule) -> None:
+        self.system, self.current = system, current
+        block = system.bodies.get("block")
+        self.gradient = None
+        if block is not None:
+            V, parent = block.forms.collapsed("temperature")
+            self.T = dolfinx.fem.Function(V)
+            self.parent = parent
+            Q = dolfinx.fem.functionspace(V.mesh, ("DG", 0))
+            self.g = dolfinx.fem.Function(Q)
+            grad = ufl.grad(self.T)
+            self.gradient = dolfinx.fem.Expression(
+                ufl.sqrt(ufl.inner(grad, grad)), Q.element.interpolation_points
+            )
+
+    def surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """x [m] and T [K] of the block's top nodes (y = 0.48 m), on every rank, sorted."""
+        x, T = np.zeros(0), np.zeros(0)
+        block = self.system.bodies.get("block")
+        if block is not None:
+            xy, values = block.nodal("temperature")
+            on = np.isclose(xy[:, 1], 0.48)
+            x, T = xy[on, 0], values[on]
+        x, T = (np.concatenate(comm.allgather(a)) for a in (x, T))
+        order = np.argsort(x)
+        x, T = x[order], T[order]
+        keep = np.concatenate([[True], np.diff(x) > 1e-12])  # nodes shared by ranks once
+        return x[keep], T[keep]
+
+    def largest_gradient(self) -> float:
+        """max |∇T| in the block [K/m]."""
+        local = 0.0
+        if self.gradient is not None:
+            block = self.system.bodies["block"]
+            self.T.x.array[:] = block.U.x.array[self.parent]
+            self.g.interpolate(self.gradient)
+            local = float(np.max(self.g.x.array, initial=0.0))
+        return comm.allreduce(local, op=MPI.MAX)
+
+    def __call__(self, system: sc.System) -> dict[str, float]:
+        report = sc.summary(system)
+        bulk = sc.bulk_heat(system)
+        contact_joule = {k: c["Joule heat"] for k, c in report["contacts"].items()}
+        generated = sum(bulk.values()) + sum(contact_joule.values())
+        x, T = self.surface()
+        mean = float(np.trapezoid(T, x) / (x[-1] - x[0]))
+        current = report["groups"]["stubs"]["current"]
+        voltage = report["groups"]["stubs"]["potential"]
+        heat = report["balance"]["heat"]
+        lost = -sum(group["heat"] for group in report["groups"].values() if "heat" in group)
+        return {
+            "line current [kA]": 1e-3 * current * 28 * 2,
+            "cathode surface mean T [K]": mean,
+            "cathode surface min T [K]": float(T.min()),
+            "cathode surface max T [K]": float(T.max()),
+            "largest gradient in the block [K/m]": self.largest_gradient(),
+            "voltage [V]": voltage,
+            "power [W]": voltage * current,
+            "coke bed share": bulk["coke"] / generated,
+            "coke contacts share": (contact_joule["anode_coke"] + contact_joule["coke_block"])
+            / generated,
+            "carbon share": (bulk["anode"] + bulk["block"] + bulk["paste"]) / generated,
+            "generated [W]": generated,
+            "lost [W]": lost,
+            "stored [W]": heat["stored"],
+            "heat imbalance [relative]": heat["relative"],
+        }
+
+
+def run(coke: float, out: Path, restart: bool = False) -> dict:
+    """The preheat of a ``coke`` [m] bed from the cold cell to the end point."""
+    current = schedule(args.schedule)
+    system = sc.System(problem(load(coke), current))
+    system.reset({"temperature": START})
+    stepper = sc.Stepper(system, "bdf2")
+    probes = Probes(system, current)
+    history = sc.History(
+        out, stepper, probes, until=limit, vtk_every=20, checkpoint_every=5, quiet=args.quiet
+    )
+    resumed = history.start(restart=restart)
+    say(f"{coke * 1e3:.0f} mm bed: {system.num_dofs()} DOFs on {comm.size} rank(s)")
+    reached = []
+
+    def after_step(stepper: sc.Stepper, result) -> bool:
+        stop = history.after_step(stepper, result)
+        if history.rows and history.rows[-1]["cathode surface mean T [K]"] >= args.target:
+            reached.append(stepper.time)
+            return True
+        return stop
+
+    tic = time.perf_counter()
+    stepper.march(
+        limit,
+        600.0,
+        tolerance=args.tolerance,
+        max_step=2 * HOUR,
+        after_step=after_step,
+        rtol=1e-10,
+    )
+    history.finish()
+    seconds = time.perf_counter() - tic
+    rows = history.rows
+    times = np.array([r["time [s]"] for r in rows])
+    steps = np.array([r["step [s]"] for r in rows])
+    # Energy over the run [J]: each step's end values times its length (the implicit scheme's
+    # own sampling): the electrical energy in (V I), the Joule heat, the heat lost through the
+    # boundaries and the heat the scheme stored. Electrical energy = Joule heat and Joule heat
+    # = lost + stored hold step by step to Newton's tolerance; the time-integration error
+    # (stored by the scheme against the state's enthalpy change) is not computed yet.
+    energy = {
+        key: float(np.sum(steps * np.array([r[f"{key} [W]"] for r in rows])))
+        for key in ("power", "generated", "lost", "stored")
+    }
+    energy["imbalance"] = energy["generated"] - energy["lost"] - energy["stored"]
+    out_report = {
+        "coke [m]": coke,
+        "dofs": system.num_dofs(),
+        "steps": stepper.steps,
+        "rejected": stepper.rejected,
+        "resumed": resumed,
+        "end point reached [h]": reached[0] / HOUR if reached else None,
+        "end time [h]": float(times[-1] / HOUR) if len(times) else 0.0,
+        "peak gradient [K/m]": max(r["largest gradient in the block [K/m]"] for r in rows),
+        "max heat imbalance": max(r["heat imbalance [relative]"] for r in rows),
+        "energy [J]": energy,
+        "factorisations": int(sum(r["factorisations"] for r in rows)),
+        "newton": [r["newton"] for r in rows],
+        "seconds": seconds,
+        "end": rows[-1],
+    }
+    system.destroy()
+    return out_report
+
+
+# ## Subdomain and monolithic Newton, step by step (the first steps, fixed length)
+def routes(coke: float, steps: int, length: float) -> dict:
+    """The largest per-field difference between the two routes at each of ``steps`` steps."""
+    current = schedule(args.schedule)
+    scene = load(coke)
+    systems = {name: sc.System(problem(scene, current)) for name in ("subdomain", "monolithic")}
+    steppers = {}
+    for name, system in systems.items():
+        system.reset({"temperature": START})
+        steppers[name] = sc.Stepper(system, "bdf2")
+    differences, seconds = [], dict.fromkeys(systems, 0.0)
+    for _ in range(steps):
+        for name, stepper in steppers.items():
+            linear = sc.Subdomains() if name == "subdomain" else sc.Monolithic()
+            tic = time.perf_counter()
+            stepper.advance(length, linear, rtol=1e-10)
+            seconds[name] += time.perf_counter() - tic
+            linear.destroy()
+        a, b = (s.state() for s in systems.values())
+        differences.append(systems["subdomain"].difference(a, b))
+        a.destroy()
+        b.destroy()
+    for system in systems.values():
+        system.destroy()
+    return {"step [s]": length, "differences": differences, "seconds": seconds}
+
+
+args.out.mkdir(parents=True, exist_ok=True)
+report: dict = {
+    "model": {
+        "slice current at full line current [A]": SLICE_CURRENT,
+        "widths [m]": WIDTH,
+        "losses [W/(m2 K)]": LOSSES,
+        "ambient [K]": AMBIENT,
+        "start [K]": START,
+        "anode pressure on the bed [Pa]": ANODE_PRESSURE,
+        "bar/cast iron pressure [Pa]": BAR_PRESSURE,
+        "end point": f"mean cathode surface temperature {args.target} K, or {limit / HOUR} h",
+        "schedule": str(args.schedule),
+    },
+    "ranks": comm.size,
+}
+report["routes"] = routes(args.coke, 3, 600.0)
+say(f"routes: largest differences per step {report['routes']['differences']}")
+beds = [args.coke] if args.no_study or args.small else [args.coke, 0.03]
+report["runs"] = {}
+for coke in beds:
+    key = f"coke {coke * 1e3:.0f} mm"
+    report["runs"][key] = run(coke, args.out / key.replace(" ", "_"), restart=args.restart)
+    r = report["runs"][key]
+    say(
+        f"{key}: {r['steps']} steps to {r['end time [h]']:.1f} h, end point "
+        f"{r['end point reached [h]']}, peak gradient {r['peak gradient [K/m]']:.0f} K/m"
+    )
+report["seconds"] = time.perf_counter() - started
+if comm.rank == 0:
+    (args.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
+    figure, axes = plt.subplots(2, 2, figsize=(12, 8))
+    for key in report["runs"]:
+        with (args.out / key.replace(" ", "_") / "history.json").open() as f:
+            rows = json.load(f)["rows"]
+        t = np.array([row["time [s]"] for row in rows]) / HOUR
+
+        def col(name, rows=rows):
+            return np.array([row[name] for row in rows])
+
+        ax = axes[0, 0]
+        for part in ("mean", "min", "max"):
+            ax.plot(t, col(f"cathode surface {part} T [K]") - 273.15, label=f"{key}, {part}")
+        ax.set_ylabel("cathode surface T [°C]")
+        axes[0, 1].plot(t, col("largest gradient in the block [K/m]"), label=key)
+        axes[0, 1].set_ylabel("largest |∇T| in the block [K/m]")
+        axes[1, 0].plot(t, col("voltage [V]"), label=f"{key}, voltage")
+        axes[1, 0].set_ylabel("voltage stubs to bar end [V]")
+        for part in ("coke bed", "coke contacts", "carbon"):
+            axes[1, 1].plot(t, col(f"{part} share"), label=f"{key}, {part}")
+        axes[1, 1].set_ylabel("share of the Joule heat")
+    for ax in axes.flat:
+        ax.set_xlabel("time [h]")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    figure.suptitle("coke bed preheat, 2D slice along a cathode block")
+    figure.tight_layout()
+    figure.savefig(args.out / "preheat.png", dpi=110)
+    plt.close(figure)
+say(f"wrote {args.out}/ in {time.perf_counter() - started:.1f} s")
