@@ -30,8 +30,9 @@
 # φ = 0 at the bar's end; the current enters the anodes through their stubs.
 #
 # Run `python demos/demo_preheat.py` (`--small`: a coarse mesh and the first hours, for the
-# tests; `--coke 0.03`: a thicker bed; `--restart`: go on from the latest checkpoint;
-# `--no-study`: the base case only, not the 30 mm bed).
+# tests; `--quarter`: the 3D quarter of the slice, `geo/preheat_quarter.geo`, with its real
+# widths; `--coke 0.03`: a thicker bed; `--restart`: go on from the latest checkpoint;
+# `--no-study`: the base case only, not the 30 mm bed; `--size`, `--fine`: the mesh).
 
 import argparse
 import csv
@@ -71,6 +72,11 @@ parser.add_argument("--target", type=float, default=1173.15, help="end point: me
 parser.add_argument("--hours", type=float, help="time limit [h] (default 120; --small 6)")
 parser.add_argument("--tolerance", type=float, default=2.0, help="local error per step [K]")
 parser.add_argument("--no-study", action="store_true", help="the base case only")
+parser.add_argument("--size", type=float, help="element size away from the contacts [m]")
+parser.add_argument("--fine", type=float, help="element size on the contacts [m]")
+parser.add_argument(
+    "--quarter", action="store_true", help="the 3D quarter (geo/preheat_quarter.geo)"
+)
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 started = time.perf_counter()
@@ -81,17 +87,21 @@ def say(*text: object) -> None:
         print(*text, flush=True)
 
 
-size, fine = (0.16, 0.04) if args.small else (0.04, 0.01)
+if args.quarter:
+    size, fine = (0.2, 0.04) if args.small else (0.12, 0.03)
+else:
+    size, fine = (0.16, 0.04) if args.small else (0.04, 0.01)
+size, fine = args.size or size, args.fine or fine
 limit = HOUR * (args.hours or (6.0 if args.small else 120.0))
 
 # ## Data
 #
 # 300 kA line current, 28 cathode blocks (Dupuis 2011, as the slot scene): the half slice
-# carries half a block's current at full line current.
+# carries half a block's current at full line current, the quarter half of that.
 LINE_CURRENT = 300e3  # A
-SLICE_CURRENT = LINE_CURRENT / 28 / 2  # A
+SLICE_CURRENT = LINE_CURRENT / 28 / (4 if args.quarter else 2)  # A
 BLOCK_WIDTH = 0.48  # m, out of the slice's plane (Dupuis 2011)
-WIDTH = {  # m: each body's width out of the plane
+WIDTH = {  # m: each body's width out of the plane (the 3D quarter has its real widths)
     "anode": BLOCK_WIDTH,  # the slice cuts a block-wide strip of the anodes above
     "coke": BLOCK_WIDTH,
     "block": BLOCK_WIDTH,
@@ -99,8 +109,12 @@ WIDTH = {  # m: each body's width out of the plane
     "bar": 0.16,  # the bar (Dupuis 2011)
     "paste": BLOCK_WIDTH,
 }
+if args.quarter:
+    WIDTH = dict.fromkeys(WIDTH, 1.0)
+    BLOCK_WIDTH = 1.0
 SLOT_H, BAR = 0.176, 0.16  # m
-STUBS = 3 * 0.18  # m of anode top under the stubs (geo/preheat_slice.geo)
+# the anode top under the stubs: m (2D: 3 of 0.18 m) or m² (3D: 3 half stubs of 0.18 × 0.09)
+STUBS = 3 * 0.18 * (0.09 if args.quarter else 1.0)
 AMBIENT = 323.15  # K (this model's choice, as the slot scene)
 START = AMBIENT  # K, the cold cell
 LOSSES = {  # W/(m² K) of real surface: this model's choices, see the report
@@ -176,15 +190,9 @@ def slot_contact() -> sc.Contact:
 
 
 BODIES = ["anode", "coke", "block", "cast_iron", "bar", "paste"]
-INTERFACES = [
-    "anode_coke",
-    "coke_block",
-    "slot_top",
-    "bar_top",
-    "block_paste",
-    "iron_paste",
-    "bar_paste",
-]
+INTERFACES = ["anode_coke", "coke_block", "slot_top", "bar_top"]
+INTERFACES += ["slot_side", "bar_side"] if args.quarter else []  # 2D: in the top faces
+INTERFACES += ["block_paste", "iron_paste", "bar_paste"]
 BAR_PRESSURE = 0.1e6  # Pa: the bar/cast iron contact's pressure, this model's assumption
 
 
@@ -212,13 +220,19 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
     contacts = {
         "anode_coke": contact(bed, BLOCK_WIDTH, ANODE_PRESSURE),
         "coke_block": contact(bed, BLOCK_WIDTH, ANODE_PRESSURE),
-        "slot_top": slot_contact(),
-        # the bar's top and two sides, at an assumed pressure
-        "bar_top": contact(contacts_ / "steel_cast_iron.toml", 3 * BAR, BAR_PRESSURE),
         "block_paste": contact(paste, BLOCK_WIDTH),
         "iron_paste": contact(paste, WIDTH["cast_iron"]),
-        "bar_paste": contact(paste, 3 * BAR),
     }
+    bar = contacts_ / "steel_cast_iron.toml"  # at an assumed pressure
+    if args.quarter:  # each face on its own
+        contacts["slot_side"] = contact(contacts_ / "carbon_cast_iron_vertical_constant.toml", 1)
+        contacts["slot_top"] = contact(contacts_ / "carbon_cast_iron_horizontal_constant.toml", 1)
+        contacts["bar_side"] = contacts["bar_top"] = contact(bar, 1.0, BAR_PRESSURE)
+        contacts["bar_paste"] = contact(paste, 1.0)
+    else:  # the slot's three faces in one, the bar's three faces in one
+        contacts["slot_top"] = slot_contact()
+        contacts["bar_top"] = contact(bar, 3 * BAR, BAR_PRESSURE)
+        contacts["bar_paste"] = contact(paste, 3 * BAR)
     conditions = [CurrentDensity("stubs", current), Potential("bar_end", 0.0)] + [
         Convection(g, h * WIDTH[LOSS_BODY[g]], AMBIENT) for g, h in LOSSES.items()
     ]
@@ -227,7 +241,7 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
 
 def load(coke: float) -> sc.Scene:
     return sc.load_scene(
-        ROOT / "geo" / "preheat_slice.geo",
+        ROOT / "geo" / ("preheat_quarter.geo" if args.quarter else "preheat_slice.geo"),
         bodies=BODIES,
         interfaces=INTERFACES,
         parameters={"size": size, "fine": fine, "coke": coke},
@@ -252,20 +266,29 @@ class Probes:
             self.gradient = dolfinx.fem.Expression(
                 ufl.sqrt(ufl.inner(grad, grad)), Q.element.interpolation_points
             )
+            # the block's top face (the cathode surface): ∫ T and its area [m or m²]
+            mesh, top = V.mesh, V.mesh.topology.dim - 1
+            facets = dolfinx.mesh.locate_entities_boundary(
+                mesh, top, lambda x: np.isclose(x[top], 0.48)
+            )
+            tags = dolfinx.mesh.meshtags(mesh, top, facets, np.ones_like(facets))
+            ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, subdomain_id=1)
+            one = dolfinx.fem.Constant(mesh, 1.0)
+            self.top = [dolfinx.fem.form(self.T * ds), dolfinx.fem.form(one * ds)]
 
-    def surface(self) -> tuple[np.ndarray, np.ndarray]:
-        """x [m] and T [K] of the block's top nodes (y = 0.48 m), on every rank, sorted."""
-        x, T = np.zeros(0), np.zeros(0)
+    def surface(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Mean T [K] of the cathode surface; x [m] and T [K] of its nodes, on every rank."""
+        x, T, integrals = np.zeros(0), np.zeros(0), np.zeros(2)
         block = self.system.bodies.get("block")
         if block is not None:
-            xy, values = block.nodal("temperature")
-            on = np.isclose(xy[:, 1], 0.48)
-            x, T = xy[on, 0], values[on]
+            self.T.x.array[:] = block.U.x.array[self.parent]
+            integrals = np.array([dolfinx.fem.assemble_scalar(f) for f in self.top])
+            xyz, values = block.nodal("temperature")
+            on = np.isclose(xyz[:, block.forms.W.mesh.topology.dim - 1], 0.48)
+            x, T = xyz[on, 0], values[on]
+        integrals = comm.allreduce(integrals, op=MPI.SUM)  # each facet on one rank
         x, T = (np.concatenate(comm.allgather(a)) for a in (x, T))
-        order = np.argsort(x)
-        x, T = x[order], T[order]
-        keep = np.concatenate([[True], np.diff(x) > 1e-12])  # nodes shared by ranks once
-        return x[keep], T[keep]
+        return float(integrals[0] / integrals[1]), x, T
 
     def largest_gradient(self) -> float:
         """max |∇T| in the block [K/m]."""
@@ -282,17 +305,18 @@ class Probes:
         bulk = sc.bulk_heat(system)
         contact_joule = {k: c["Joule heat"] for k, c in report["contacts"].items()}
         generated = sum(bulk.values()) + sum(contact_joule.values())
-        x, T = self.surface()
-        mean = float(np.trapezoid(T, x) / (x[-1] - x[0]))
+        mean, x, T = self.surface()
         current = report["groups"]["stubs"]["current"]
         voltage = report["groups"]["stubs"]["potential"]
         heat = report["balance"]["heat"]
         lost = -sum(group["heat"] for group in report["groups"].values() if "heat" in group)
         return {
-            "line current [kA]": 1e-3 * current * 28 * 2,
+            "line current [kA]": 1e-3 * current * LINE_CURRENT / SLICE_CURRENT,
             "cathode surface mean T [K]": mean,
             "cathode surface min T [K]": float(T.min()),
             "cathode surface max T [K]": float(T.max()),
+            "coldest point x [m]": float(x[np.argmin(T)]),
+            "hottest point x [m]": float(x[np.argmax(T)]),
             "largest gradient in the block [K/m]": self.largest_gradient(),
             "voltage [V]": voltage,
             "power [W]": voltage * current,
@@ -307,18 +331,22 @@ class Probes:
         }
 
 
-def run(coke: float, out: Path, restart: bool = False) -> dict:
-    """The preheat of a ``coke`` [m] bed from the cold cell to the end point."""
+def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False) -> dict:
+    """The preheat of a ``coke`` [m] bed from the cold cell to the end point.
+
+    ``linear``: Newton's linear solver, ``"subdomain"`` or ``"monolithic"``.
+    """
     current = schedule(args.schedule)
     system = sc.System(problem(load(coke), current))
     system.reset({"temperature": START})
+    cold = sc.enthalpy(system)  # [J]
     stepper = sc.Stepper(system, "bdf2")
     probes = Probes(system, current)
     history = sc.History(
         out, stepper, probes, until=limit, vtk_every=20, checkpoint_every=5, quiet=args.quiet
     )
     resumed = history.start(restart=restart)
-    say(f"{coke * 1e3:.0f} mm bed: {system.num_dofs()} DOFs on {comm.size} rank(s)")
+    say(f"{coke * 1e3:.0f} mm bed, {linear}: {system.num_dofs()} DOFs on {comm.size} rank(s)")
     reached = []
 
     def after_step(stepper: sc.Stepper, result) -> bool:
@@ -328,6 +356,7 @@ def run(coke: float, out: Path, restart: bool = False) -> dict:
             return True
         return stop
 
+    solver = sc.Subdomains() if linear == "subdomain" else sc.Monolithic()
     tic = time.perf_counter()
     stepper.march(
         limit,
@@ -335,25 +364,43 @@ def run(coke: float, out: Path, restart: bool = False) -> dict:
         tolerance=args.tolerance,
         max_step=2 * HOUR,
         after_step=after_step,
+        linear=solver,
         rtol=1e-10,
     )
+    solver.destroy()
     history.finish()
     seconds = time.perf_counter() - tic
     rows = history.rows
     times = np.array([r["time [s]"] for r in rows])
     steps = np.array([r["step [s]"] for r in rows])
-    # Energy over the run [J]: each step's end values times its length (the implicit scheme's
-    # own sampling): the electrical energy in (V I), the Joule heat, the heat lost through the
-    # boundaries and the heat the scheme stored. Electrical energy = Joule heat and Joule heat
-    # = lost + stored hold step by step to Newton's tolerance; the time-integration error
-    # (stored by the scheme against the state's enthalpy change) is not computed yet.
+
+    # Energy over the run [J]. Each step's equation holds its own balance, to Newton's
+    # tolerance: electrical power in (V I) = Joule heat = lost + stored at the step's end, the
+    # stored heat being ρ c_p(Tⁿ) times BDF2's rate; their sums times the steps ("scheme")
+    # close to that tolerance. The heat stored in fact is the change of the bodies' enthalpy
+    # (sc.enthalpy, exact in T): against the electrical energy in minus the heat lost, both
+    # integrated in time by the trapezoidal rule (second order, as BDF2), it gives the energy
+    # balance of the run, whose error is the time integration's.
+    def integral(key: str, rule: str) -> float:
+        values = np.array([r[f"{key} [W]"] for r in rows])
+        if rule == "scheme":
+            return float(np.sum(steps * values))
+        start = values[0]  # t = 0: the first step's value (its 600 s are a small share)
+        return float(np.trapezoid(np.concatenate([[start], values]), np.r_[0.0, times]))
+
     energy = {
-        key: float(np.sum(steps * np.array([r[f"{key} [W]"] for r in rows])))
-        for key in ("power", "generated", "lost", "stored")
+        "scheme": {k: integral(k, "scheme") for k in ("power", "generated", "lost", "stored")},
+        "electrical in": integral("power", "trapezoid"),
+        "lost": integral("lost", "trapezoid"),
+        "enthalpy change": sc.enthalpy(system) - cold,
     }
-    energy["imbalance"] = energy["generated"] - energy["lost"] - energy["stored"]
+    scheme = energy["scheme"]
+    scheme["imbalance"] = scheme["generated"] - scheme["lost"] - scheme["stored"]
+    energy["imbalance"] = energy["electrical in"] - energy["lost"] - energy["enthalpy change"]
+    energy["imbalance, relative"] = energy["imbalance"] / energy["electrical in"]
     out_report = {
         "coke [m]": coke,
+        "linear": linear,
         "dofs": system.num_dofs(),
         "steps": stepper.steps,
         "rejected": stepper.rejected,
@@ -416,22 +463,53 @@ report: dict = {
 }
 report["routes"] = routes(args.coke, 3, 600.0)
 say(f"routes: largest differences per step {report['routes']['differences']}")
-beds = [args.coke] if args.no_study or args.small else [args.coke, 0.03]
+# The base bed by both routes (--small: the subdomain route; the routes are compared above),
+# then the 30 mm bed by the subdomain route.
+cases = [(args.coke, "subdomain")]
+cases += [] if args.small else [(args.coke, "monolithic")]
+cases += [] if args.no_study or args.small else [(0.03, "subdomain")]
 report["runs"] = {}
-for coke in beds:
-    key = f"coke {coke * 1e3:.0f} mm"
-    report["runs"][key] = run(coke, args.out / key.replace(" ", "_"), restart=args.restart)
+for coke, linear in cases:
+    key = f"coke {coke * 1e3:.0f} mm" + ("" if linear == "subdomain" else f", {linear}")
+    folder = args.out / key.replace(" ", "_").replace(",", "")
+    report["runs"][key] = run(coke, folder, linear, restart=args.restart)
     r = report["runs"][key]
     say(
-        f"{key}: {r['steps']} steps to {r['end time [h]']:.1f} h, end point "
-        f"{r['end point reached [h]']}, peak gradient {r['peak gradient [K/m]']:.0f} K/m"
+        f"{key}: {r['steps']} steps to {r['end time [h]']:.1f} h in {r['seconds']:.0f} s, "
+        f"end point {r['end point reached [h]']}, peak gradient {r['peak gradient [K/m]']:.0f} "
+        f"K/m, energy balance of the run (time integration) "
+        f"{r['energy [J]']['imbalance, relative']:.1e}"
     )
+    report["runs"][key]["folder"] = folder.name
+# What the preheat engineer compares: time to the end point and peak gradient per bed; and
+# what the solver user compares: each route's time and factorisations on the same run.
+report["comparison"] = {
+    key: {
+        "end point reached [h]": r["end point reached [h]"],
+        "peak gradient [K/m]": r["peak gradient [K/m]"],
+        "surface spread at the end [K]": r["end"]["cathode surface max T [K]"]
+        - r["end"]["cathode surface min T [K]"],
+    }
+    for key, r in report["runs"].items()
+    if r["linear"] == "subdomain"
+}
+routes_run = [r for r in report["runs"].values() if r["coke [m]"] == args.coke]
+if len(routes_run) == 2:
+    sub, mono = routes_run
+    report["subdomain / monolithic"] = {
+        "seconds": [sub["seconds"], mono["seconds"], sub["seconds"] / mono["seconds"]],
+        "factorisations": [sub["factorisations"], mono["factorisations"]],
+        "steps": [sub["steps"], mono["steps"]],
+    }
+    say(f"subdomain / monolithic: {report['subdomain / monolithic']}")
 report["seconds"] = time.perf_counter() - started
 if comm.rank == 0:
     (args.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
     figure, axes = plt.subplots(2, 2, figsize=(12, 8))
-    for key in report["runs"]:
-        with (args.out / key.replace(" ", "_") / "history.json").open() as f:
+    for key, r in report["runs"].items():
+        if r["linear"] != "subdomain":
+            continue  # the same curves
+        with (args.out / r["folder"] / "history.json").open() as f:
             rows = json.load(f)["rows"]
         t = np.array([row["time [s]"] for row in rows]) / HOUR
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 
-__all__ = ["Constant", "Law", "PowerLaw", "Table", "as_law", "check_finite"]
+__all__ = ["Constant", "Law", "PowerLaw", "Table", "antiderivative", "as_law", "check_finite"]
 
 Law = Callable[[ufl.core.expr.Expr, ufl.core.expr.Expr], ufl.core.expr.Expr]
 
@@ -116,6 +116,30 @@ class Table:
             for i, hp in enumerate(hats_p)
             for j, ht in enumerate(hats_t)
         )
+
+
+def antiderivative(law: float | Law, T: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+    """∫₀^T law(s) ds of a law of temperature alone: a number or a :class:`Table` in T.
+
+    Exact: piecewise quadratic between the table's nodes, linear beyond them (the value is
+    held there). E.g. the enthalpy ∫ c_p dT [J/kg] of a heat capacity.
+
+    Raises:
+        ValueError: Any other law (no closed form to integrate).
+    """
+    if not callable(law):
+        return float(law) * T
+    if isinstance(law, Constant):
+        return float(law.value) * T
+    if not isinstance(law, Table) or len(law.pressures) != 1:
+        raise ValueError(f"antiderivative: {law!r} is not a number or a table in temperature alone")
+    nodes, values = law.temperatures, [float(v) for v in law.values[0]]
+    total = values[0] * ufl.min_value(T, nodes[0])
+    for k in range(len(nodes) - 1):
+        length = nodes[k + 1] - nodes[k]
+        y = ufl.min_value(ufl.max_value(T - nodes[k], 0.0), length)
+        total += values[k] * y + (values[k + 1] - values[k]) * y**2 / (2 * length)
+    return total + values[-1] * ufl.max_value(T - nodes[-1], 0.0)
 
 
 def _hats(x: ufl.core.expr.Expr, nodes: Sequence[float]) -> list[ufl.core.expr.Expr]:

@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 import ufl
 import ufl.algorithms
+from ufl.algorithms.compute_form_data import preprocess_form
 
 from subdomain_contact.laws import Law, check_finite
 from subdomain_contact.scene import Body, Scene
@@ -680,6 +681,16 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     for form in [sources, storage, *loads.values()]:
         if form is not None:
             bulk += form
+    # UFL sums the cell integrals of one form into one before it estimates their quadrature
+    # degree: give every cell term that sum's degree, so that the heat sources and storage,
+    # assembled alone for the balances, are the very numbers the residual holds (and the
+    # Jacobian, derived from the residual, its exact derivative)
+    lowered = preprocess_form(bulk, False)  # as UFL estimates: lowered and differentiated
+    degree = max(
+        ufl.algorithms.estimate_total_polynomial_degree(i.integrand())
+        for i in lowered.integrals_by_type("cell")
+    )
+    bulk, sources, storage = (_with_degree(f, degree) for f in (bulk, sources, storage))
     links, fluxes, remainders, ties = {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
     material = problem.materials[body.name]
@@ -714,6 +725,20 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
     )  # fmt: skip
 
 
+def _with_degree(form: ufl.Form | None, degree: int) -> ufl.Form | None:
+    """``form`` with the quadrature degree of its cell integrals set to ``degree``."""
+    if form is None:
+        return None
+    return ufl.Form(
+        [
+            i.reconstruct(metadata={**i.metadata(), "quadrature_degree": degree})
+            if i.integral_type() == "cell"
+            else i
+            for i in form.integrals()
+        ]
+    )
+
+
 def _bulk(
     m: Material,
     u: dict,
@@ -726,9 +751,9 @@ def _bulk(
     """Conduction and thermoelasticity in the volume [W, A, N], and the heat sources apart.
 
     The sources (Joule heat and ``heat_source``) are a form of their own, −(σ|∇φ|² + Q) v_T,
-    so that the heat generated is the sum of the same assembled numbers the residual holds.
-    Each term is an integral of its own, with its own quadrature degree. Also returns the
-    material's laws of T by name.
+    so that the heat generated is the sum of the same assembled numbers the residual holds
+    (with the residual's quadrature: :func:`body_forms`). Also returns the material's laws of
+    T by name.
     """
     reference = constant(m.reference_temperature or 0.0)
     T = u.get("temperature", reference)

@@ -29,6 +29,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.body import Body
+from subdomain_contact.laws import antiderivative
 from subdomain_contact.physics import FIELD_OF, Displacement, split_fields
 from subdomain_contact.system import System
 
@@ -38,6 +39,7 @@ __all__ = [
     "bulk_heat",
     "contact_fields",
     "current",
+    "enthalpy",
     "force",
     "heat",
     "summary",
@@ -473,6 +475,31 @@ def _generated(system: System) -> float:
         local = -sum(_assembled(f)[dofs].sum() for f in forms if f is not None)
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM)
+
+
+def enthalpy(system: System, reference: float = 0.0) -> float:
+    """Heat content [J] of every body that stores heat, from ``reference`` [K].
+
+    Σ ∫ ρ ∫_reference^T c_p dT dx (2D: per metre of depth), the integral in T exact
+    (:func:`~subdomain_contact.laws.antiderivative`: c_p a number or a table in T). The
+    difference between two states is the heat stored between them, whatever the time steps:
+    against the heat a time scheme stored step by step, it measures that scheme's error.
+    Quadrature in space of degree 6, beyond the residual's: the integral's own.
+    """
+    local = 0.0
+    for name, body in system.bodies.items():
+        m = system.problem.materials[name]
+        if m.density is None:
+            continue
+        T = split_fields(body.U, body.forms.fields)["temperature"]
+        content = antiderivative(m.heat_capacity, T) - antiderivative(
+            m.heat_capacity, ufl.as_ufl(float(reference))
+        )
+        dx = ufl.dx(domain=body.forms.W.mesh, degree=6)
+        form = dolfinx.fem.form(float(m.density) * content * dx)
+        part = body.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+        local += _once(system, part)
+    return system.comm.allreduce(local, op=MPI.SUM)
 
 
 def bulk_heat(system: System) -> dict[str, float]:

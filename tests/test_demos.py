@@ -31,22 +31,22 @@ def run_demo(path, out, monkeypatch, *extra):
     runpy.run_path(str(path), run_name="__main__")
 
 
-def assert_balanced_to_newton(run, heat_bound):
+def assert_balanced_to_newton(run):
     """Each balance of a Newton solve within what Newton's final residual allows.
 
     A balance's imbalance is the sum of its field's residual entries at the free DOFs and
-    masters (the flows are the entries at the supports), so |imbalance| ≤ √n ‖F_f‖₂
-    (Cauchy–Schwarz; n, every DOF of the scene, is more than the field's). The report divides
-    it by the balance's own scale, not Newton's: the bound does too. On top, the round-off of
-    summing n flows of at most that scale: n ε. Current and force obey it; the heat balance
-    does not (``heat_bound`` instead, see its caller).
+    masters (the flows are the entries at the supports, the heat generated and stored the
+    residual's own terms, integrated alike), so |imbalance| ≤ √n ‖F_f‖₂ (Cauchy–Schwarz; n,
+    every DOF of the scene, is more than the field's). The report divides it by the
+    balance's own scale, not Newton's: the bound does too. On top, the round-off of summing
+    n flows of at most that scale: n ε.
     """
     n = sum(run["dofs"].values())
-    for name, field in (("current", "potential"), ("force", "displacement")):
+    fields = {"heat": "temperature", "current": "potential", "force": "displacement"}
+    for name, field in fields.items():
         budget = run["balance"][name]
         bound = np.sqrt(n) * run["final_residual"][field] / budget["scale"]
         assert budget["relative"] <= bound + n * np.finfo(float).eps, (name, budget, bound)
-    assert run["balance"]["heat"]["relative"] < heat_bound, run["balance"]["heat"]
 
 
 def demo(name):
@@ -310,12 +310,7 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
         solved += [f"{setup}, bar 174 mm, subdomain"] if study else []
         for key in solved:
             run = runs[key]
-            # the heat imbalance is no solver error: 3e-3 W of 481 W of Joule heat (relative
-            # 5.9e-9 of the 5.3e5 W scale) where the residual bounds it to 1e-8 W, the same on
-            # both routes to 3 digits. Likely a quadrature mismatch: the readback integrates
-            # the Joule heat as a form of its own, with its own estimated degree (open in
-            # issue 16). Measured 5.9e-9, 4.8e-9 (160 mm), 1.6e-8, 2.4e-9 (174 mm): 2x margin.
-            assert_balanced_to_newton(run, heat_bound=3.2e-8)
+            assert_balanced_to_newton(run)
             total = run["current_total_A"]
             # the whole current enters the top: the Neumann data, 300 kA / 28 blocks / 4,
             # integrated exactly (a constant density on plane facets)
@@ -370,14 +365,21 @@ def test_demo_preheat(shared_tmp, monkeypatch, comm):
     # every step's heat balance to Newton's tolerance, as test_demo_transient_joule
     # (measured ≤ 5e-11)
     assert run["max heat imbalance"] < 1e-8
-    # over the run: the electrical energy in (V I, the stubs' mean potential times their
-    # current: exact for a uniform current density) is the Joule heat of the bulk and the
-    # contacts, step by step, to Newton's tolerance (the discrete energy identity); and the
-    # Joule heat is what was lost plus what the scheme stored (each step's balance)
+    # over the run, each step's balance summed: the electrical energy in (V I, the stubs'
+    # mean potential times their current: exact for a uniform current density) is the Joule
+    # heat of the bulk and the contacts, step by step, to Newton's tolerance (the discrete
+    # energy identity); the Joule heat is what was lost plus what the scheme stored
+    scheme = run["energy [J]"]["scheme"]
+    assert scheme["power"] > 0 and scheme["stored"] > 0
+    assert abs(scheme["power"] - scheme["generated"]) < 1e-8 * scheme["power"]
+    assert abs(scheme["imbalance"]) < 1e-8 * scheme["generated"]
+    # the energy balance of the run: electrical energy in − lost (trapezoidal rule in time)
+    # against the enthalpy change of the bodies, off by the time integration alone: measured
+    # 5.1e-3 with 8 steps of up to 2 h (local error 2 K per step); 4x margin, the steps are
+    # chosen adaptively and may differ on another machine
     energy = run["energy [J]"]
-    assert energy["power"] > 0 and energy["stored"] > 0
-    assert abs(energy["power"] - energy["generated"]) < 1e-8 * energy["power"]
-    assert abs(energy["imbalance"]) < 1e-8 * energy["generated"]
+    assert energy["enthalpy change"] > 0
+    assert abs(energy["imbalance, relative"]) < 2e-2
     # the end state: the shares of the Joule heat are shares (the metals' is the rest)
     end = run["end"]
     shares = [end[f"{part} share"] for part in ("coke bed", "coke contacts", "carbon")]
@@ -386,4 +388,23 @@ def test_demo_preheat(shared_tmp, monkeypatch, comm):
     assert end["cathode surface mean T [K]"] <= end["cathode surface max T [K]"]
     assert (out / "preheat.png").stat().st_size > 10_000
     assert (out / "coke_20_mm" / "series.pvd").exists()
+    assert report["ranks"] == comm.size
+
+
+def test_demo_preheat_quarter(shared_tmp, monkeypatch, comm):
+    """The 3D quarter of the slice, its first hour: the routes agree, the balances close."""
+    out = shared_tmp / "out_preheat_quarter"
+    run_demo(demo("demo_preheat"), out, monkeypatch, "--quarter", "--hours", "1")
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    # both routes to rtol 1e-10 of each field's scale (as the 2D slice; measured ≤ 1e-14)
+    assert max(max(step.values()) for step in report["routes"]["differences"]) < 1e-8
+    run = report["runs"]["coke 20 mm"]
+    assert run["end time [h]"] == pytest.approx(1.0, rel=1e-12)
+    # 300 kA / 28 blocks / 4 through the quarter at 20 % + 80 % × 1/24 of the line current
+    assert run["end"]["line current [kA]"] == pytest.approx(300 * (0.2 + 0.8 / 24), rel=1e-12)
+    assert run["max heat imbalance"] < 1e-8  # as the 2D slice
+    scheme = run["energy [J]"]["scheme"]
+    assert abs(scheme["power"] - scheme["generated"]) < 1e-8 * scheme["power"]
+    assert abs(scheme["imbalance"]) < 1e-8 * scheme["generated"]
     assert report["ranks"] == comm.size

@@ -471,3 +471,51 @@ def test_a_run_resumes_from_any_step(comm, shared_tmp):
         assert [r["step"] for r in again] == [r["step"] for r in rows]
         assert [r["T [K]"] for r in again] == pytest.approx([r["T [K]"] for r in rows], rel=1e-12)
         assert max(whole.difference(resumed.state(), whole.state()).values()) <= 1e-12
+
+
+def test_the_enthalpy_is_the_heat_the_steps_stored(comm):
+    """sc.enthalpy against closed forms, and against the heat that backward Euler stored.
+
+    A uniform state: ρ V ∫ c_p dT in closed form (the table's integral is piecewise
+    quadratic). Constant c_p: backward Euler's stored heat ρ c_p (Tⁿ − Tⁿ⁻¹) telescopes, so
+    its sum over the steps is the enthalpy change to round-off. c_p(T) a table: the scheme
+    takes c_p at the step's end, off from ∫ c_p dT by at most ½ max|c_p'| (ΔTⁿ)² per node
+    and step: the bound, with the largest nodal ΔT of each step (≤ 1 K here)."""
+    scene = two_plates_scene(6, 6, comm=comm)  # two 1 m × 1 m plates
+    table = sc.Table((0.0,), (0.0, 0.5, 1.0), [[800.0, 1200.0, 1300.0]])  # J/(kg K)
+    slope = 800.0  # max |c_p'| [J/(kg K²)], on the first segment
+    for capacity, exact in ((1000.0, True), (table, False)):
+        problem = dataclasses.replace(
+            heated_plates(scene),
+            materials={
+                name: dataclasses.replace(m, heat_capacity=capacity)
+                for name, m in heated_plates(scene).materials.items()
+            },
+        )
+        system = make_system(problem)
+        # a uniform state, T = 0.8 K: ρ V ∫₀^0.8 c_p over both plates (ρ = 4000, V = 1)
+        system.reset({"temperature": 0.8})
+        if exact:
+            closed = 2 * 4000.0 * 1000.0 * 0.8
+        else:  # the trapezoids of the piecewise-linear c_p to 0.5 K, then to 0.8 K
+            closed = 2 * 4000.0 * ((800 + 1200) / 2 * 0.5 + (1200 + 1260) / 2 * 0.3)
+        assert sc.enthalpy(system) == pytest.approx(closed, rel=1e-12)
+        system.reset()
+        before = sc.enthalpy(system)
+        stepper = sc.Stepper(system, "backward_euler")
+        stored, bound = 0.0, 0.0
+        for _ in range(5):
+            previous = {n: b.nodal("temperature")[1] for n, b in system.bodies.items()}
+            stepper.advance(4e4, rtol=1e-12)
+            stored += 4e4 * sc.balance(system)["heat"]["stored"]
+            change = max(
+                np.abs(b.nodal("temperature")[1] - previous[n]).max(initial=0.0)
+                for n, b in system.bodies.items()
+            )
+            change = comm.allreduce(change, op=MPI.MAX)
+            bound += 0.5 * slope * change**2 * 2 * 4000.0  # ρ V over both plates
+        error = abs(stored - (sc.enthalpy(system) - before))
+        if exact:  # telescoping: round-off of 5 sums of ~1e5 J
+            assert error < 1e-9 * abs(stored)
+        else:
+            assert 0 < error <= bound
