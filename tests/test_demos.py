@@ -288,13 +288,13 @@ def test_demo_transient_joule(shared_tmp, monkeypatch, comm):
     assert (out / "series_error.png").exists()
 
 
-# Six Newton solves from the cold start and two coarse ones (≈ 5 min serial on the development
-# machine, 2 cores): the suite's 300 s guard against hangs is per test, so this one gets 3 times it.
+# Six Newton solves from the cold start (≈ 5 min serial on the development machine, 2
+# cores): the suite's 300 s guard against hangs is per test, so this one gets 3 times it.
 @pytest.mark.timeout(900)
 def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
     out = shared_tmp / "out_collector_bar_slot"
-    # under mpiexec the base runs only: the design and mesh studies repeat the same code on
-    # other meshes, already run serially (and they would take 40 % of this test's time)
+    # under mpiexec the base runs only: the design study repeats the same code on another
+    # mesh, already run serially (and it would take 40 % of this test's time)
     study = comm.size == 1
     extra = () if study else ("--no-study",)
     run_demo(demo("demo_collector_bar_slot"), out, monkeypatch, *extra)
@@ -335,10 +335,7 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
         # -5.4 mV (constant) and -2.9 mV (pressure) at this size
         change = report["design_study"][setup]["change [mV]"]
         assert change < 0, (setup, change)
-        # the mesh study's coarser level converged from the cold start too
-        coarse = report["mesh_convergence"][setup]
-        assert coarse["coarsening"] == [2.0, 1.0]
-        assert coarse["dofs"][0] < coarse["dofs"][1] / 2  # a coarser mesh
+    assert report["mesh_convergence"] == {}  # at the default size only (three levels)
     assert report["boundary_conditions"]["start"].startswith("uniform 300.0 K")
     assert (out / "slot_faces.png").stat().st_size > 10_000
     assert (out / "constant").is_dir() and (out / "pressure").is_dir()  # the VTK
@@ -392,7 +389,10 @@ def test_demo_preheat(shared_tmp, monkeypatch, comm):
 
 
 def test_demo_preheat_quarter(shared_tmp, monkeypatch, comm):
-    """The 3D quarter of the slice, its first hour: the routes agree, the balances close."""
+    """The 3D quarter of the slice, its first hour, under MPI: the routes agree, the balances
+    close. (Serially the demo's code is the 2D slice's, tested above: CI time.)"""
+    if comm.size == 1:
+        pytest.skip("the 3D quarter runs under mpiexec; its code is the 2D slice's")
     out = shared_tmp / "out_preheat_quarter"
     run_demo(demo("demo_preheat"), out, monkeypatch, "--quarter", "--hours", "1")
     comm.barrier()
