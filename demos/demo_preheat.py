@@ -252,8 +252,8 @@ def load(coke: float) -> sc.Scene:
 class Probes:
     """The cathode surface, the block's gradient, the voltage, the power and where it goes."""
 
-    def __init__(self, system: sc.System, current: sc.Schedule) -> None:
-        self.system, self.current = system, current
+    def __init__(self, system: sc.System) -> None:
+        self.system = system
         block = system.bodies.get("block")
         self.gradient = None
         if block is not None:
@@ -341,7 +341,7 @@ def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False
     system.reset({"temperature": START})
     cold = sc.enthalpy(system)  # [J]
     stepper = sc.Stepper(system, "bdf2")
-    probes = Probes(system, current)
+    probes = Probes(system)
     history = sc.History(
         out, stepper, probes, until=limit, vtk_every=20, checkpoint_every=5, quiet=args.quiet
     )
