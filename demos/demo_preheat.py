@@ -304,11 +304,11 @@ class Probes:
         report = sc.summary(system)
         bulk = sc.bulk_heat(system)
         contact_joule = {k: c["Joule heat"] for k, c in report["contacts"].items()}
-        generated = sum(bulk.values()) + sum(contact_joule.values())
         mean, x, T = self.surface()
         current = report["groups"]["stubs"]["current"]
         voltage = report["groups"]["stubs"]["potential"]
         heat = report["balance"]["heat"]
+        generated = heat["generated"]  # the bulk's and the contacts' Joule heat
         lost = -sum(group["heat"] for group in report["groups"].values() if "heat" in group)
         return {
             "line current [kA]": 1e-3 * current * LINE_CURRENT / SLICE_CURRENT,
@@ -329,6 +329,11 @@ class Probes:
             "stored [W]": heat["stored"],
             "heat imbalance [relative]": heat["relative"],
         }
+
+
+def route(name: str):
+    """Newton's linear solver: ``"subdomain"`` or ``"monolithic"``."""
+    return sc.Subdomains() if name == "subdomain" else sc.Monolithic()
 
 
 def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False) -> dict:
@@ -356,7 +361,7 @@ def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False
             return True
         return stop
 
-    solver = sc.Subdomains() if linear == "subdomain" else sc.Monolithic()
+    solver = route(linear)
     tic = time.perf_counter()
     stepper.march(
         limit,
@@ -425,22 +430,22 @@ def routes(coke: float, steps: int, length: float) -> dict:
     current = schedule(args.schedule)
     scene = load(coke)
     systems = {name: sc.System(problem(scene, current)) for name in ("subdomain", "monolithic")}
-    steppers = {}
+    steppers, solvers = {}, {name: route(name) for name in systems}
     for name, system in systems.items():
         system.reset({"temperature": START})
         steppers[name] = sc.Stepper(system, "bdf2")
     differences, seconds = [], dict.fromkeys(systems, 0.0)
     for _ in range(steps):
         for name, stepper in steppers.items():
-            linear = sc.Subdomains() if name == "subdomain" else sc.Monolithic()
             tic = time.perf_counter()
-            stepper.advance(length, linear, rtol=1e-10)
+            stepper.advance(length, solvers[name], rtol=1e-10)
             seconds[name] += time.perf_counter() - tic
-            linear.destroy()
         a, b = (s.state() for s in systems.values())
         differences.append(systems["subdomain"].difference(a, b))
         a.destroy()
         b.destroy()
+    for solver in solvers.values():
+        solver.destroy()
     for system in systems.values():
         system.destroy()
     return {"step [s]": length, "differences": differences, "seconds": seconds}

@@ -469,12 +469,10 @@ def _generated(system: System) -> float:
     total = 0.0
     for body in system.bodies.values():
         dofs = _dofs(body, "temperature", None)
-        forms = [body.forms.sources] + [
-            body.forms.remainders[k] for k in body.layers if "potential" in body.forms.fields
-        ]
+        forms = [body.forms.remainders[k] for k in body.layers]
         local = -sum(_assembled(f)[dofs].sum() for f in forms if f is not None)
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
-    return system.comm.allreduce(total, op=MPI.SUM)
+    return system.comm.allreduce(total, op=MPI.SUM) + sum(bulk_heat(system).values())
 
 
 def enthalpy(system: System, reference: float = 0.0) -> float:
