@@ -51,7 +51,7 @@ from subdomain_contact.modes import modes
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor
-from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp
+from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp, ordered, ordering
 
 __all__ = ["ITERATIVE", "Body"]
 
@@ -129,6 +129,7 @@ class Body:
         self.name, self.U, W = body.name, self.forms.U, self.forms.W
         self.scene_body = body  # the mesh, its tags and its file node numbers
         self.comm: MPI.Comm = W.mesh.comm
+        self.dim = W.mesh.topology.dim
         self.prefix = prefix
         self.layers = layers
         bs = W.dofmap.index_map_bs
@@ -323,7 +324,13 @@ class Body:
         if self.factor is None:  # the contact's block follows in :meth:`factorise`
             self._scaled = self.A_bulk.copy()
             self._scaled.diagonalScale(D, D)
-            self.factor = CondensedFactor(self._scaled, self.kept_local, None, self.prefix)
+            self.factor = CondensedFactor(
+                self._scaled,
+                self.kept_local,
+                None,
+                self.prefix,
+                ordering(self.dim, self._scaled.getSize()[0], again=not self.bulk_is_linear),
+            )
         else:  # the same sparsity: MUMPS keeps its analysis (ordering, symbolic phase)
             self.A_bulk.copy(self._scaled, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             self._scaled.diagonalScale(D, D)
@@ -468,7 +475,9 @@ class Body:
             self.ksp.setOperators(self._A)
             self.ksp.setUp()
         else:
-            self.ksp = factorise(self._A, self.prefix, f"body '{self.name}'", self.ksp)
+            what = f"body '{self.name}'"
+            again = not self.is_linear
+            self.ksp = factorise(self._A, self.prefix, what, self.ksp, dim=self.dim, again=again)
         self.factorisations += 1
 
     def _near_null_space(self) -> PETSc.NullSpace:
@@ -755,7 +764,8 @@ class Body:
             M.createSubMatrix(*p) for M, p in [(K, (e, e)), (K, (i, e)), (K, (i, i)), (Kt, (i, e))]
         )
         K_ie = K_ie_sparse.convert("dense", out=PETSc.Mat())
-        ksp = make_ksp(K_ii, f"{self.prefix}condense_", DIRECT)
+        options = ordered(DIRECT, self.dim, K_ii.getSize()[0], again=False)
+        ksp = make_ksp(K_ii, f"{self.prefix}condense_", options)
         X = K_ie.duplicate()
         ksp.getPC().getFactorMatrix().matSolve(K_ie, X)
         # K_ei X from the rows each rank owns, summed (PETSc's MPIAIJ × MPIDense product
@@ -865,7 +875,12 @@ class Body:
 
         Named with a point [m] where it fails, or None (collective on the body).
         """
-        if not self.forms.laws:
+        laws = {  # a constant's value was checked with the problem's data
+            name: (law, dm)
+            for name, (law, dm) in self.forms.laws.items()
+            if not isinstance(law, dolfinx.fem.Constant)
+        }
+        if not laws:
             return None
         field = self.forms.fields[0]  # temperature or potential: the laws' fields come first
         V, parent_of = self.forms.collapsed(field)
@@ -874,7 +889,7 @@ class Body:
             v = v if len(self.forms.fields) == 1 else ufl.split(v)[0]
             self._law_checks = [
                 (name, dolfinx.fem.form(ufl.conditional(ufl.ge(law, 0.0), 0.0, 1.0) * v * dm))
-                for name, (law, dm) in self.forms.laws.items()
+                for name, (law, dm) in laws.items()
             ]
         owned = V.dofmap.index_map.size_local
         for name, form in self._law_checks:

@@ -225,7 +225,10 @@ class StripSolve:
             destroy(self.K, self.ksp)
             self.K, self.ksp = K, None
         ksp, self.ksp = self.ksp, None  # a failed factorisation is destroyed by factorise
-        self.ksp = factorise(self.K, self.prefix, "sparse strip corrector", ksp)
+        dim, again = system.problem.scene.dim, not system.is_linear
+        self.ksp = factorise(
+            self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
+        )
         self.factorisations += 1
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -20,7 +20,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
-from subdomain_contact.solvers import DIRECT, destroy, make_ksp
+from subdomain_contact.solvers import DIRECT, destroy, make_ksp, ordered
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
 
@@ -117,7 +117,9 @@ class Monolithic:
             return
         self.destroy()
         self.K = merged
-        self.ksp = make_ksp(self.K, self.prefix, self.options)
+        dim, rows = system.problem.scene.dim, self.K.getSize()[0]
+        options = ordered(self.options, dim, rows, again=not system.is_linear)
+        self.ksp = make_ksp(self.K, self.prefix, options)
         self.factorisations += 1
         if self.monitor is not None:
 

@@ -93,6 +93,11 @@ class Scene:
     group_comm: MPI.Comm
     group_roots: tuple[int, ...]
 
+    @property
+    def dim(self) -> int:
+        """Topological dimension of the bodies' meshes (2 or 3)."""
+        return next(iter(self.bodies.values())).mesh.topology.dim
+
     def interfaces_of(self, body: str) -> list[Interface]:
         """Interfaces that ``body`` touches, in scene order."""
         return [i for i in self.interfaces.values() if body in i.bodies]

@@ -64,6 +64,8 @@ class CondensedFactor:
         kept: Local indices of the kept rows (the order of ``sigma``'s rows and columns).
         added: ``H``, dense on the kept rows (None: call :meth:`update` before solving).
         prefix: PETSc options prefix of the factorisation (``-<prefix>mat_mumps_icntl_*``).
+        ordering: MUMPS's ordering ICNTL(7) (None: MUMPS's choice); ``-<prefix>mat_mumps_icntl_7``
+            wins.
 
     Attributes:
         sigma: ``Σ = K_ss − K_si K_ii⁻¹ K_is``, dense, in the order of ``kept``.
@@ -75,10 +77,13 @@ class CondensedFactor:
         kept: npt.NDArray[np.int32],
         added: Matrix | None,
         prefix: str,
+        ordering: int | None = None,
     ) -> None:
         if K.getComm().getSize() != 1:
             raise ValueError(f"{prefix}: a Schur complement needs the matrix on one rank")
         self.size, self.prefix = len(kept), prefix
+        given = PETSc.Options().hasName(prefix + "mat_mumps_icntl_7")
+        self.ordering = None if given else ordering
         self.kept = np.asarray(kept, dtype=PETSc.IntType)
         self.pc: PETSc.PC | None = None
         self._build(K)
@@ -106,6 +111,8 @@ class CondensedFactor:
             self.F = self.pc.getFactorMatrix()
             if relaxation > 20:
                 self.F.setMumpsIcntl(14, relaxation)
+            if self.ordering is not None:
+                self.F.setMumpsIcntl(7, self.ordering)
             rows = PETSc.IS().createGeneral(self.kept, comm=K.getComm())
             _call("MatFactorSetSchurIS", self.F.handle, rows.handle)
             rows.destroy()

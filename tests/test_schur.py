@@ -5,9 +5,12 @@ import dolfinx.fem.petsc
 import numpy as np
 import pytest
 import ufl
+from helpers import make_system
 from mpi4py import MPI
+from petsc4py import PETSc
 
 import subdomain_contact as sc
+from subdomain_contact import solvers
 from subdomain_contact.schur import CondensedFactor
 from verification.cases import (
     bars_scene,
@@ -99,3 +102,40 @@ def test_interface_operators_from_schur_equal_whole_body_solves(scene, problem):
             # two direct computations of the same matrix; the fixed slaves' 1e8-stiff
             # diagonal sets the scale of K̂ there: measured ≤ 1e-13 relative
             assert np.abs(value - reference).max() <= 1e-10 * np.abs(reference).max(), key
+
+
+def test_the_ordering_follows_the_mesh_and_the_factorisations(comm, plates, monkeypatch):
+    """MUMPS orders a 2D body and the merged matrix by AMD (``solvers.ordering``); a 2D matrix
+    above ``AMD_ROWS`` that is factorised again keeps MUMPS's choice; an option wins.
+
+    INFOG(7) is the ordering MUMPS used (0: AMD, 5: METIS); ICNTL(7) = 7 is its automatic
+    choice.
+    """
+    problem = two_plates(plates, h=10.0).problem
+
+    def orderings(**options):
+        system = make_system(problem, **options)
+        sc.solve(system)
+        return {b.name: (b.factor.F.getMumpsIcntl(7), b.factor.F.getMumpsInfog(7))
+                for b in system.bodies.values()}  # fmt: skip
+
+    assert set(orderings().values()) == {(0, 0)}  # linear: factorised once, by AMD
+    materials = {**problem.materials, "plate_A": sc.Material(conductivity=lambda p, T: 1 + T / 1e3)}
+    nonlinear = sc.Problem(plates, materials, problem.contacts, problem.conditions)
+    monkeypatch.setattr(solvers, "AMD_ROWS", 0)
+    system = make_system(nonlinear)
+    sc.solve(system)
+    chosen = {b.name: b.factor.F.getMumpsIcntl(7) for b in system.bodies.values()}
+    assert chosen.get("plate_A", 7) == 7 and chosen.get("plate_B", 0) == 0  # B stays linear
+    monkeypatch.undo()
+    database = PETSc.Options()
+    database["sc_body_plate_A_mat_mumps_icntl_7"] = 5
+    try:
+        used = orderings()
+    finally:
+        database.delValue("sc_body_plate_A_mat_mumps_icntl_7")
+    assert used.get("plate_A", (5, 5)) == (5, 5) and used.get("plate_B", (0, 0)) == (0, 0)
+    monolithic = sc.Monolithic()
+    sc.solve(make_system(problem), monolithic)
+    assert monolithic.ksp.getPC().getFactorMatrix().getMumpsInfog(7) == 0
+    monolithic.destroy()
