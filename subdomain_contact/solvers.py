@@ -16,7 +16,7 @@ DIRECT: Mapping[str, str] = MappingProxyType(
 
 #: Rows up to which a 2D mesh's matrix that is factorised again and again is ordered by
 #: approximate minimum degree: see :func:`ordering`.
-AMD_ROWS = 300_000
+AMD_ROWS = 100_000
 
 
 def ordering(dim: int, rows: int, *, again: bool) -> int | None:
@@ -28,7 +28,9 @@ def ordering(dim: int, rows: int, *, again: bool) -> int | None:
     with METIS, 0.03 + 0.19 s with AMD; 526k rows 3.1 + 1.4 s, 0.21 + 2.3 s; 1.05M rows 7.7 +
     4.9 s, 0.6 + 10.2 s). A factorisation made again on new values keeps its ordering, so for
     a matrix factorised ``again`` (it depends on the state) above :data:`AMD_ROWS` rows
-    METIS's cheaper factorisations win back its analysis within a few Newton steps. In 3D
+    METIS's cheaper factorisations win back its analysis within a few Newton steps (the
+    monolithic Newton of ``hot_squeezed_bars``, T and u, 9 factorisations: 197k rows, 18.1
+    and 18.7 s with METIS, 19.2 and 22.0 s with AMD; 100k rows, even within the noise). In 3D
     nested dissection wins outright (69k rows: 3.4 s in all with METIS, 9.2 s with AMD).
 
     Returns:
