@@ -44,8 +44,8 @@ def ordering(dim: int, rows: int, *, again: bool) -> int | None:
 def ordered(options: Mapping[str, str], dim: int, rows: int, *, again: bool) -> Mapping[str, str]:
     """``options`` with :func:`ordering` on each MUMPS solve among them.
 
-    Every ``<p>pc_factor_mat_solver_type: mumps`` (a direct solve, or BDDC's local solves)
-    gets ``<p>mat_mumps_icntl_7``, unless ``options`` give it.
+    Every ``<p>pc_factor_mat_solver_type: mumps`` (a direct solve, or BDDC's Dirichlet,
+    Neumann and coarse solves) gets ``<p>mat_mumps_icntl_7``, unless ``options`` give it.
     """
     chosen = ordering(dim, rows, again=again)
     if chosen is None:
