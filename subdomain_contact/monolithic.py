@@ -36,9 +36,10 @@ CG_GAMG: Mapping[str, str] = MappingProxyType(
 
 #: PETSc's balancing domain decomposition by constraints on the unassembled matrix (one
 #: subdomain per rank, the master layers its interface), deluxe scaling, MUMPS for the local
-#: and coarse problems; GMRES to a relative residual of 1e-12 (CG broke down, PETSc reason
-#: −8, on the two plates at h = 1e6, where GMRES takes 1 to 2 iterations). Every rank must
-#: hold whole bodies (``placement="groups"`` with no more ranks than bodies).
+#: and coarse problems (ordered by :func:`~subdomain_contact.solvers.ordering`); GMRES to a
+#: relative residual of 1e-12 (CG broke down, PETSc reason −8, on the two plates at h = 1e6,
+#: where GMRES takes 1 to 2 iterations). Every rank must hold whole bodies
+#: (``placement="groups"`` with no more ranks than bodies).
 BDDC: Mapping[str, str] = MappingProxyType(
     {
         "ksp_type": "gmres",
@@ -49,6 +50,7 @@ BDDC: Mapping[str, str] = MappingProxyType(
         "pc_bddc_dirichlet_pc_factor_mat_solver_type": "mumps",
         "pc_bddc_neumann_pc_factor_mat_solver_type": "mumps",
         "pc_bddc_coarse_pc_factor_mat_solver_type": "mumps",
+        "sub_schurs_mat_solver_type": "mumps",  # deluxe: each subdomain's one factorisation
     }
 )
 

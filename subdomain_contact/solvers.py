@@ -44,16 +44,18 @@ def ordering(dim: int, rows: int, *, again: bool) -> int | None:
 def ordered(options: Mapping[str, str], dim: int, rows: int, *, again: bool) -> Mapping[str, str]:
     """``options`` with :func:`ordering` on each MUMPS solve among them.
 
-    Every ``<p>pc_factor_mat_solver_type: mumps`` (a direct solve, or BDDC's Dirichlet,
-    Neumann and coarse solves) gets ``<p>mat_mumps_icntl_7``, unless ``options`` give it.
+    Every ``<p>pc_factor_mat_solver_type: mumps`` (a direct solve; BDDC's Dirichlet, Neumann
+    and coarse solves) and ``<p>mat_solver_type: mumps`` (BDDC's deluxe factorisation,
+    ``sub_schurs_``) gets ``<p>mat_mumps_icntl_7``, unless ``options`` give it.
     """
     chosen = ordering(dim, rows, again=again)
     if chosen is None:
         return options
     added = {
-        key.removesuffix("pc_factor_mat_solver_type") + "mat_mumps_icntl_7": str(chosen)
+        key.removesuffix("pc_factor_mat_solver_type").removesuffix("mat_solver_type")
+        + "mat_mumps_icntl_7": str(chosen)
         for key, value in options.items()
-        if key.endswith("pc_factor_mat_solver_type") and value == "mumps"
+        if key.endswith("mat_solver_type") and value == "mumps"
     }
     return MappingProxyType({**added, **options})
 
