@@ -8,8 +8,12 @@ their rigid translation). Both Newtons start cold and use default settings.
 
 Printed per element size: DOFs, master DOFs, Newton iterations (subdomain, monolithic), inner
 rounds, the bodies' sparse factorisations, the wall time of each Newton (system set-up
-included) and their ratio measured in the same run, and the largest difference between the
-two solutions over T, φ and the three components of u, each relative to the field's range.
+included) and their ratio measured in the same run, the peak resident set of each Newton
+above the one before it (the largest over the ranks; Linux: the peak is reset through
+``/proc/self/clear_refs``), and the largest difference between the two solutions over T, φ
+and the three components of u, each relative to the field's range. ``--bodies iterative``
+solves the subdomain route's bodies by GMRES + GAMG per field; ``--no-monolithic`` leaves the
+monolithic Newton out where it does not fit.
 
 Run: ``./dev python benchmarks/bench_3d_bodies.py`` (``--sizes 0.05 0.025``), and under
 ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``: the monolithic Newton spreads the blocks over
@@ -19,6 +23,7 @@ test: compare ratios, not seconds.
 
 import argparse
 import time
+from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
 from mpi4py import MPI
@@ -30,6 +35,12 @@ from verification.nodal import NodalReference, error_against, field_values
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--sizes", type=float, nargs="+", default=[0.05, 0.025, 0.012])
 parser.add_argument("--count", type=int, default=4, help="number of blocks")
+parser.add_argument("--no-monolithic", action="store_true", help="subdomain Newton only")
+parser.add_argument(
+    "--bodies", default="auto", choices=["auto", "direct", "iterative"],
+    help="the subdomain route's body solves (sc.System's solver): auto is iterative for a "
+    "3D body above system.ITERATIVE_ABOVE DOFs",
+)  # fmt: skip
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 placement = "groups" if comm.size > 1 else "shared"
@@ -37,14 +48,25 @@ placement = "groups" if comm.size > 1 else "shared"
 FIELDS = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
 
 
-def newton(scene, linear, reference=None):
-    """(result, seconds, DOFs, references or worst difference) of one Newton from 300 K."""
+def resident(what: str = "VmRSS") -> int:
+    """This process's resident set [KiB] (``VmHWM``: its peak); reading VmRSS resets the peak."""
+    status = Path("/proc/self/status").read_text()
+    value = int(next(line.split()[1] for line in status.splitlines() if line.startswith(what)))
+    if what == "VmRSS":
+        Path("/proc/self/clear_refs").write_text("5")
+    return value
+
+
+def newton(scene, linear, reference=None, bodies="direct"):
+    """(result, seconds, GiB, DOFs, references or worst difference) of a Newton from 300 K."""
     comm.barrier()
+    base = resident()
     tic = time.perf_counter()
-    with sc.System(squeezed_row(scene)) as system:
+    with sc.System(squeezed_row(scene), solver=bodies) as system:
         system.reset({"temperature": 300.0})
         result = sc.solve(system, linear, rtol=1e-12)
         seconds = comm.allreduce(time.perf_counter() - tic, op=MPI.MAX)
+        memory = comm.allreduce((resident("VmHWM") - base) / 2**20, op=MPI.MAX)
         dofs = system.num_dofs()
         if reference is None:
             compared = [NodalReference(*field_values(system, f, c)) for f, c in FIELDS]
@@ -53,29 +75,36 @@ def newton(scene, linear, reference=None):
                 error_against(system, ref.at(field_values(system, f, c)[0]), f, c)
                 for ref, (f, c) in zip(reference, FIELDS, strict=True)
             )
-    return result, seconds, dofs, compared
+    return result, seconds, memory, dofs, compared
 
 
 if comm.rank == 0:
     print(
         "| size [m] | DOFs | masters | Newton (sub, mono) | inner rounds | factorisations "
-        "| ranks | monolithic [s] | subdomain [s] | ratio | difference |"
+        "| ranks | monolithic [s] | subdomain [s] | ratio | memory [GiB] (sub, mono) "
+        "| difference |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
 for size in args.sizes:
-    monolithic = sc.Monolithic()
-    mono, mono_seconds, dofs, reference = newton(
-        blocks_row_scene(args.count, size, comm=comm, placement="shared"), monolithic
-    )
-    monolithic.destroy()
+    mono, mono_seconds, mono_memory, reference = None, float("nan"), float("nan"), None
+    if not args.no_monolithic:
+        monolithic = sc.Monolithic()
+        mono, mono_seconds, mono_memory, _, reference = newton(
+            blocks_row_scene(args.count, size, comm=comm, placement="shared"), monolithic
+        )
+        monolithic.destroy()
     scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
-    sub, sub_seconds, _, difference = newton(scene, sc.Subdomains(), reference)
+    sub, sub_seconds, sub_memory, dofs, difference = newton(
+        scene, sc.Subdomains(), reference, args.bodies
+    )
     if comm.rank == 0:
         total = sum(v for k, v in dofs.items() if k != "masters")
         rounds = sum(s.inner_rounds for s in sub.history)
         print(
-            f"| {size} | {total} | {dofs['masters']} | {sub.iterations}, {mono.iterations} "
-            f"| {rounds} | {sub.factorisations} | {comm.size} | {mono_seconds:.1f} "
-            f"| {sub_seconds:.1f} | {sub_seconds / mono_seconds:.2f} | {difference:.1e} |",
+            f"| {size} | {total} | {dofs['masters']} | {sub.iterations}, "
+            f"{mono.iterations if mono else '—'} | {rounds} | {sub.factorisations} "
+            f"| {comm.size} | {mono_seconds:.1f} | {sub_seconds:.1f} "
+            f"| {sub_seconds / mono_seconds:.2f} | {sub_memory:.2f}, {mono_memory:.2f} "
+            f"| {'—' if mono is None else f'{difference:.1e}'} |",
             flush=True,
         )

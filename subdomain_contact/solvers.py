@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 
 from petsc4py import PETSc
@@ -61,12 +61,18 @@ def ordered(options: Mapping[str, str], dim: int, rows: int, *, again: bool) -> 
 
 
 def make_ksp(
-    A: PETSc.Mat, prefix: str, options: Mapping[str, str], *, setup: bool = True
+    A: PETSc.Mat,
+    prefix: str,
+    options: Mapping[str, str],
+    *,
+    setup: bool = True,
+    splits: Sequence[tuple[str, PETSc.IS]] = (),
 ) -> PETSc.KSP:
     """KSP on ``A`` configured from ``options`` under its own ``prefix``; set up (factorised).
 
     With ``setup=False`` the factorisation waits for the first ``setUp`` or solve (for a
-    matrix not assembled yet).
+    matrix not assembled yet). ``splits``: the named index sets of a ``fieldsplit``
+    preconditioner (their ``fieldsplit_<name>_`` options among ``options``).
 
     Options already in the PETSc database under ``prefix`` (from the command line) win;
     ``options`` are removed from the database once the KSP is set up (or configured, with
@@ -83,6 +89,8 @@ def make_ksp(
     ksp.setOperators(A)
     ksp.setFromOptions()
     pc = ksp.getPC()
+    if splits:
+        pc.setFieldSplitIS(*splits)
     if pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps":
         pc.setFactorSetUpSolverType()
         for key, value in options.items():
