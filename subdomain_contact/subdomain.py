@@ -134,15 +134,16 @@ class Subdomains:
             several interfaces, floats, is solved iteratively or is spread with many master
             DOFs (above), else the fixed point.
         coarse: Add the coarse correction to the Krylov preconditioner.
-        lag: Where some body applies ``S^α`` by body solves (the sparse strip corrector),
-            keep the interface Krylov's preconditioner (the strip's factorisation, the
-            coarse matrix, whose columns cost body solves) from one set-up to the next
-            (Newton steps, time steps) while it serves: it is rebuilt when the active master
-            DOFs change, and at once when a Krylov solve with it needs more than
-            :data:`LAG_GROWTH` times the iterations of the first solve after its build. It
-            only preconditions: the true rounds use the current bodies. (With dense bodies
-            the rebuild costs less than the iterations a kept one adds: four 3D blocks,
-            31k DOFs, 25.6 s rebuilt at every Newton step, 29.2 s kept.)
+        lag: Where some body is solved iteratively, keep the interface Krylov's
+            preconditioner (the strip's factorisation, the coarse matrix, whose columns
+            cost iterative body solves) from one set-up to the next (Newton steps, time
+            steps) while it serves: it is rebuilt when the active master DOFs change, and
+            at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
+            iterations of the first solve after its build. It only preconditions: the true
+            rounds use the current bodies. With factorised bodies the rebuild costs less
+            than the rounds and iterations a kept one adds (the collector bar slot at 17k
+            DOFs, 18 Newton steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D
+            blocks at 31k DOFs: 25.6 s and 29.2 s), so there it is rebuilt every time.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body on one rank forms it from its Schur
             block (dense algebra), and a body spread over several ranks or solved
@@ -233,7 +234,10 @@ class Subdomains:
                 for name, body in system.bodies.items()
                 if self._dense(body)
             }
-        lag = self.lag and self.use_krylov and costly  # its build costs body solves
+        iterative = system.comm.allreduce(
+            any(b.iterative for b in system.bodies.values()), op=MPI.LOR
+        )
+        lag = self.lag and self.use_krylov and iterative  # its build costs Krylov body solves
         self._lagged = lag and kept and not self._built["stale"]
         if not self._lagged:
             self._build_preconditioner()
