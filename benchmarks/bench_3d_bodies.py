@@ -23,13 +23,13 @@ test: compare ratios, not seconds.
 
 import argparse
 import time
-from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
 from mpi4py import MPI
 
 import subdomain_contact as sc
 from verification.cases import blocks_row_scene, squeezed_row
+from verification.memory import resident
 from verification.nodal import NodalReference, error_against, field_values
 
 parser = argparse.ArgumentParser(description=__doc__)
@@ -46,15 +46,6 @@ comm = MPI.COMM_WORLD
 placement = "groups" if comm.size > 1 else "shared"
 #: (field, component) pairs compared.
 FIELDS = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
-
-
-def resident(what: str = "VmRSS") -> int:
-    """This process's resident set [KiB] (``VmHWM``: its peak); reading VmRSS resets the peak."""
-    status = Path("/proc/self/status").read_text()
-    value = int(next(line.split()[1] for line in status.splitlines() if line.startswith(what)))
-    if what == "VmRSS":
-        Path("/proc/self/clear_refs").write_text("5")
-    return value
 
 
 def newton(scene, linear, reference=None, bodies="direct"):

@@ -48,6 +48,7 @@ def worker(method: str, size: float, reference: Path | None, out: Path) -> None:
 
     import subdomain_contact as sc
     from verification.cases import blocks3d_scene, heated_blocks
+    from verification.memory import resident
     from verification.nodal import NodalReference, error_against, field_values
 
     comm = MPI.COMM_WORLD
@@ -96,15 +97,6 @@ def worker(method: str, size: float, reference: Path | None, out: Path) -> None:
         })  # fmt: skip
     if comm.rank == 0:
         out.write_text(json.dumps(rows))
-
-
-def resident(what: str = "VmRSS") -> int:
-    """This process's resident set [KiB] (``VmHWM``: its peak); reading VmRSS resets the peak."""
-    status = Path("/proc/self/status").read_text()
-    value = int(next(line.split()[1] for line in status.splitlines() if line.startswith(what)))
-    if what == "VmRSS":
-        Path("/proc/self/clear_refs").write_text("5")
-    return value
 
 
 #: Conductance from which the reference is extrapolated, and where from.
