@@ -636,7 +636,7 @@ class Body:
         if self.iterative and len(self.forms.fields) > 1:
             # The Krylov test's norm mixes fields of units K, V and m: a field of small
             # values can stop far short of its own relative tolerance (four 3D blocks, T, φ,
-            # u: u 1e4 times short), and the interface then stalls. Each field's residual is
+            # u: u up to 1e8 times short), and the interface then stalls. Each field's residual is
             # measured against its own scale, and a short solve is refined (A δ = r).
             target = max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
             for _ in range(FIELD_REFINEMENTS):

@@ -175,6 +175,7 @@ class Subdomains:
         self.krylov, self.coarse, self.dense_limit = krylov, coarse, dense_limit
         self.lag = lag
         self._built: dict | None = None  # what the kept preconditioner was built for
+        self._lagged = False  # whether this set-up kept it
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
         self._body_rtol = BODY_RTOL_FACTOR * Tolerance().rtol
