@@ -602,18 +602,27 @@ class Body:
         return y
 
     def _polluted(self, residual: Matrix, rhs: Matrix, y: Matrix, *, kept: bool = False) -> bool:
-        """Whether some field's residual is above 1e3 eps of that field's own scale.
+        """Whether some field's residual is above 1e3 eps of its own scale.
 
-        The scale of field f: ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (its rows' largest sum times its
-        own unknowns), which a solve that kept the fields apart reaches to a few eps.
-        ``kept``: the arrays are on the contact DOFs (rows), not on the owned DOFs.
+        The scale is that of :meth:`_field_residual`, which a solve that kept the fields
+        apart reaches to a few eps.
         """
+        return self._field_residual(residual, rhs, y, kept=kept) > 1e3 * np.finfo(float).eps
+
+    def _field_residual(
+        self, residual: Matrix, rhs: Matrix, y: Matrix, *, kept: bool = False
+    ) -> float:
+        """The largest over fields of ``‖r_f‖∞ / (‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞)`` (every rank).
+
+        The scale of field f: its right-hand side, and its rows' largest sum times its own
+        unknowns. ``kept``: the arrays are on the contact DOFs (rows), not on the owned DOFs.
+        """
+        ratios = np.zeros(len(self._field_dofs))
         for f, dofs in enumerate(self._kept_field_dofs if kept else self._field_dofs):
             scale = np.abs(rhs[dofs]).max(initial=0.0)
             scale += self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
-            if np.abs(residual[dofs]).max(initial=0.0) > 1e3 * np.finfo(float).eps * scale:
-                return True
-        return False
+            ratios[f] = np.abs(residual[dofs]).max(initial=0.0) / max(scale, 1e-300)
+        return self.comm.allreduce(ratios.max(), op=MPI.MAX)
 
     def _solve_schur(self, rhs: Vector) -> Vector:
         b, x = self._vectors[0], self._vectors[1]
@@ -640,28 +649,12 @@ class Body:
             # measured against its own scale, and a short solve is refined (A δ = r).
             target = max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
             for _ in range(FIELD_REFINEMENTS):
-                residual = rhs - self._apply_whole(y)
+                residual = rhs - self._apply_A(y)
                 shortfall = self._field_residual(residual, rhs, y) / target
                 if shortfall <= 1.0:
                     break
                 y += self._krylov(residual)
         return y
-
-    def _apply_whole(self, y: Vector) -> Vector:
-        """``A y`` with the body's whole matrix (owned DOFs)."""
-        x, Ay = self._vectors[0], self._vectors[2]
-        x.array[:] = y
-        self._A.mult(x, Ay)
-        return Ay.array.copy()
-
-    def _field_residual(self, residual: Vector, rhs: Vector, y: Vector) -> float:
-        """The largest over fields of ``‖r_f‖∞ / (‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞)`` (every rank)."""
-        ratios = np.zeros(len(self._field_dofs))
-        for f, dofs in enumerate(self._field_dofs):
-            scale = np.abs(rhs[dofs]).max(initial=0.0)
-            scale += self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
-            ratios[f] = np.abs(residual[dofs]).max(initial=0.0) / max(scale, 1e-300)
-        return self.comm.allreduce(ratios.max(), op=MPI.MAX)
 
     def _krylov(self, rhs: Vector) -> Vector:
         """One Krylov solve (or solve by the factorisation) of ``A y = rhs``."""
