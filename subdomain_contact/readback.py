@@ -104,8 +104,11 @@ def average(system: System, group: str, field: str) -> float:
             continue
         ds = body.forms.ds(tag)
         one = dolfinx.fem.Constant(body.forms.W.mesh, 1.0)
-        forms = (split_fields(body.forms.U, body.forms.fields)[field] * ds, one * ds)
-        local = np.array([dolfinx.fem.assemble_scalar(dolfinx.fem.form(f)) for f in forms])
+        forms = (
+            body.compiled(("mean", group, field), _fields(body)[field] * ds),
+            body.compiled(("measure", group), one * ds),
+        )
+        local = np.array([dolfinx.fem.assemble_scalar(f) for f in forms])
         totals += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     totals = system.comm.allreduce(totals, op=MPI.SUM)
     if totals[1] == 0:
@@ -328,8 +331,13 @@ def _dofs(body: Body, field: str, component: int | None) -> npt.NDArray[np.int32
     return parent_of[parent_of < body.size]
 
 
-def _assembled(form: ufl.Form) -> Vector:
-    b = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
+def _fields(body: Body) -> dict[str, ufl.core.expr.Expr]:
+    return split_fields(body.forms.U, body.forms.fields)
+
+
+def _assembled(body: Body, key: str, form: ufl.Form) -> Vector:
+    """One of the body's vector forms (compiled once, kept under ``key``), owned and ghosts."""
+    b = dolfinx.fem.petsc.assemble_vector(body.compiled(key, form))
     b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
     values = b.array.copy()
     b.destroy()
@@ -378,7 +386,7 @@ def _flow(reading: _Reading, group: str, field: str, component: int | None) -> f
         if held is not None:  # (collective: the same on every rank of the body)
             local += reading.residual(body)[held].sum()
         if group in body.forms.loads:
-            local -= _assembled(body.forms.loads[group])[dofs].sum()
+            local -= _assembled(body, ("load", group), body.forms.loads[group])[dofs].sum()
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM)
 
@@ -412,15 +420,16 @@ def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dic
             v = split_fields(ufl.TestFunction(body.forms.W), body.forms.fields)
             first = v[body.forms.fields[0]]  # any field: each channel has the same nodes
             first = first if first.ufl_shape == () else first[0]
+            area = body.compiled(("area", k), first * ds)
             side = {
                 "values": body.slaves[k].gather(body.U.x.array, layer.size, body.comm),
                 "outflow": body.contact_outflow(k),
-                "area": body.assembled_at_slaves(dolfinx.fem.form(first * ds), k),
+                "area": body.assembled_at_slaves(area, k),
             }
             if "displacement" in body.forms.fields:
                 n = ufl.FacetNormal(body.forms.W.mesh)
-                form = ufl.dot(n, v["displacement"]) * ds
-                side["normal"] = body.assembled_at_slaves(dolfinx.fem.form(form), k)
+                form = body.compiled(("normal", k), ufl.dot(n, v["displacement"]) * ds)
+                side["normal"] = body.assembled_at_slaves(form, k)
             local[name][k] = side
     return system.everywhere(local)
 
@@ -469,8 +478,12 @@ def _generated(system: System) -> float:
     total = 0.0
     for body in system.bodies.values():
         dofs = _dofs(body, "temperature", None)
-        forms = [body.forms.remainders[k] for k in body.layers]
-        local = -sum(_assembled(f)[dofs].sum() for f in forms if f is not None)
+        forms = {k: body.forms.remainders[k] for k in body.layers}
+        local = -sum(
+            _assembled(body, ("remainder", k), f)[dofs].sum()
+            for k, f in forms.items()
+            if f is not None
+        )
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM) + sum(bulk_heat(system).values())
 
@@ -489,12 +502,12 @@ def enthalpy(system: System, reference: float = 0.0) -> float:
         m = system.problem.materials[name]
         if m.density is None:
             continue
-        T = split_fields(body.U, body.forms.fields)["temperature"]
+        T = _fields(body)["temperature"]
         content = antiderivative(m.heat_capacity, T) - antiderivative(
             m.heat_capacity, ufl.as_ufl(float(reference))
         )
         dx = ufl.dx(domain=body.forms.W.mesh, degree=6)
-        form = dolfinx.fem.form(float(m.density) * content * dx)
+        form = body.compiled(("enthalpy", float(reference)), float(m.density) * content * dx)
         part = body.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
         local += _once(system, part)
     return system.comm.allreduce(local, op=MPI.SUM)
@@ -512,7 +525,8 @@ def bulk_heat(system: System) -> dict[str, float]:
     for name, body in system.bodies.items():
         if body.forms.sources is None:
             continue
-        part = -_assembled(body.forms.sources)[_dofs(body, "temperature", None)].sum()
+        part = -_assembled(body, "sources", body.forms.sources)[_dofs(body, "temperature", None)]
+        part = part.sum()
         local[name] = _once(system, body.comm.allreduce(part, op=MPI.SUM))
     return {name: system.comm.allreduce(value, op=MPI.SUM) for name, value in local.items()}
 
@@ -524,6 +538,6 @@ def _stored(system: System) -> float:
         if body.forms.storage is None:
             continue
         dofs = _dofs(body, "temperature", None)
-        local = _assembled(body.forms.storage)[dofs].sum()
+        local = _assembled(body, "storage", body.forms.storage)[dofs].sum()
         total += _once(system, body.comm.allreduce(local, op=MPI.SUM))
     return system.comm.allreduce(total, op=MPI.SUM)
