@@ -33,7 +33,7 @@ interface operator is only ever applied, one solve per application.
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Mapping
+from collections.abc import Callable, Hashable, Mapping
 from types import MappingProxyType
 
 import dolfinx
@@ -703,34 +703,37 @@ class Body:
         kept = self.kept_local
         b_s = self._gather_kept(np.zeros(len(kept)) if b is None else b[kept])
         y_s, Ay_s = self._gather_kept(y[kept]), self._gather_kept(Ay.array[kept])
-        b_rows = {k: b_s[at, None] for k, at in self.position.items()}
-        Ay_rows = {k: Ay_s[at, None] for k, at in self.position.items()}
-        residuals = self._master_residuals(b_rows, y_s[:, None], Ay_rows, columns)
+        residuals = self._master_residuals(
+            lambda at: b_s[at, None] - Ay_s[at, None], y_s[:, None], columns
+        )
         return y, {k: r[:, 0] for k, r in residuals.items()}
 
     def _master_residuals(
         self,
-        b_rows: dict[str, Matrix],
+        unbalanced: Callable[[npt.NDArray[np.intp]], Matrix],
         y_s: Matrix,
-        Ay_rows: dict[str, Matrix],
         masters: dict[str, Matrix],
     ) -> dict[str, Matrix]:
         """``r_k`` for columns of contact-DOF solutions ``y_s``.
 
-        ``b_rows[k]`` and ``Ay_rows[k]``: the right-hand side and ``A_bulk y`` on the slave
-        rows of k (``position[k]``). Two equal forms, each exact where the other loses digits:
-        for a stiff link (its block larger than the bulk's, field by field) the reaction
-        form, the body's own equation without the link; for a soft link, and at fixed
-        slaves, the link itself, whose round-off scales with the link instead of the bulk.
+        ``unbalanced(at)``: the right-hand side minus ``A_bulk y`` on the contact DOFs
+        ``at``. Two equal forms, each exact where the other loses digits: for a stiff link
+        (its block larger than the bulk's, field by field) the reaction form, the body's own
+        equation without the link; for a soft link, and at fixed slaves, the link itself,
+        whose round-off scales with the link instead of the bulk. The reaction form is
+        evaluated on the rows that take it only: with the Schur block its ``A_bulk y`` is a
+        dense product as costly as the solve.
         """
         out = {}
         for k, rows in self._rows.items():
-            link = {j: rows["L"][j] @ y_s + rows["BP"][j] @ masters[j] for j in self.layers}
-            share = b_rows[k] - Ay_rows[k]
-            for j in self.layers:
-                if j != k:
-                    share = share - link[j]
-            r = np.where(self.use_link[k][:, None], -link[k], -share)
+            r = -(rows["L"][k] @ y_s + rows["BP"][k] @ masters[k])
+            stiff = np.flatnonzero(~self.use_link[k])
+            if stiff.size:
+                share = unbalanced(self.position[k][stiff])
+                for j in self.layers:
+                    if j != k:
+                        share = share - (rows["L"][j] @ y_s + rows["BP"][j] @ masters[j])[stiff]
+                r[stiff] = -share
             blocks = self.blocks[k]
             if "CtP" in blocks:
                 r = r + blocks["CtP"] @ y_s + blocks["DtP"] @ masters[k]
@@ -778,12 +781,9 @@ class Body:
                 yz, bz = y_s @ z, rhs_s @ z
                 if self._polluted(bz - self.sigma @ yz - self.L_bc @ yz, bz, yz, kept=True):
                     y_s += self._solve_kept(rhs_s - self.sigma @ y_s - self.L_bc @ y_s)
-            Ay_rows = {k: self.sigma[at] @ y_s for k, at in self.position.items()}
-        else:
-            y_s, Ay_s = self._solve_columns(rhs_s)
-            Ay_rows = {k: Ay_s[at] for k, at in self.position.items()}
-        zero = {k: np.zeros((len(at), y_s.shape[1])) for k, at in self.position.items()}
-        return self._master_residuals(zero, y_s, Ay_rows, masters)
+            return self._master_residuals(lambda at: -(self.sigma[at] @ y_s), y_s, masters)
+        y_s, Ay_s = self._solve_columns(rhs_s)
+        return self._master_residuals(lambda at: -Ay_s[at], y_s, masters)
 
     def _solve_kept(self, rhs_s: Matrix) -> Matrix:
         """``(Σ + L)⁻¹ rhs_s`` by the scaled dense factorisation of the Schur block."""
