@@ -24,6 +24,7 @@ from typing import Protocol
 import dolfinx
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.body import Body
@@ -197,17 +198,22 @@ class StripSolve:
         self.rows: PETSc.IS | None = None
         #: Factorisations made
         self.factorisations = 0
+        #: Bodies every DOF of which lies in the strip (on every rank): the strip holds their
+        #: whole ``S^α``, kernel modes included.
+        self.whole: frozenset[str] = frozenset()
 
     def update(self, system: System, layers: int) -> None:
         """Restrict the merged matrix to the strips and factorise (its analysis kept)."""
         self.comm = system.comm
         if self.rows is None:
             layout = Layout(system)
-            picked = []
+            picked, whole = [], {}
             for name, body in system.bodies.items():
                 seeds = np.unique(np.concatenate([s.local_dofs for s in body.slaves.values()]))
                 strip = dofs_within_layers(body.forms.W, seeds.astype(np.int32), layers)
                 picked.append(layout.body(name, body.start + strip))
+                whole[name] = body.comm.allreduce(strip.size == body.size, op=MPI.LAND)
+            self.whole = frozenset(n for n, w in system.everywhere(whole).items() if w)
             self.masters = 0
             if self.comm.rank == 0:
                 first = layout.mine + system.master_slice.start
