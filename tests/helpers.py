@@ -34,12 +34,13 @@ def make_system(problem, **options):
     return system
 
 
-def linear_solve(problem, corrector=None, *, rtol=1e-10, **options):
+def linear_solve(problem, corrector=None, *, rtol=1e-10, solver=None, **options):
     """The whole linear problem by the subdomain iteration alone: (system, inner result).
 
     One Newton step from the cold state, its linear solve driven directly (so that a failing
     iteration raises :class:`~subdomain_contact.SubdomainConvergenceError` with its history);
-    the system then holds the solution.
+    the system then holds the solution. ``solver``: a :class:`~subdomain_contact.Subdomains`
+    to use (and inspect after), instead of one made from ``corrector`` and ``options``.
     """
     system = make_system(problem)
     system.reset()
@@ -47,7 +48,7 @@ def linear_solve(problem, corrector=None, *, rtol=1e-10, **options):
     f = system.create_vector()
     system.residual(f)
     system.assemble_jacobian()
-    solver = sc.Subdomains(corrector, **options)
+    solver = solver or sc.Subdomains(corrector, **options)
     solver.setup(system)
     y, result = solver.solve(f.array_r.copy(), sc.Tolerance(rtol=rtol))
     x = system.state()
