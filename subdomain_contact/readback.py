@@ -19,6 +19,8 @@ collective over the system's communicator.
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+
 import dolfinx
 import dolfinx.fem.petsc
 import dolfinx.geometry
@@ -335,7 +337,7 @@ def _fields(body: Body) -> dict[str, ufl.core.expr.Expr]:
     return split_fields(body.forms.U, body.forms.fields)
 
 
-def _assembled(body: Body, key: str, form: ufl.Form) -> Vector:
+def _assembled(body: Body, key: Hashable, form: ufl.Form) -> Vector:
     """One of the body's vector forms (compiled once, kept under ``key``), owned and ghosts."""
     b = dolfinx.fem.petsc.assemble_vector(body.compiled(key, form))
     b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
