@@ -10,10 +10,11 @@ master increments are corrected.
 * The **interface Krylov** solve treats every interface at once: the master residual is affine
   in the master increments, with slope ``S = Σ_α S^α`` (the primal Schur complement of the
   scene), so ``S y_m = −R(0)`` is solved by CG (a symmetric problem) or GMRES, preconditioned by
-  the per-interface correctors plus a coarse correction with a few unknowns per body (its
-  constants for T and φ, its rigid motions for u), as in balancing domain decomposition
-  (Mandel 1993). ``S^α`` is applied as a dense matrix where the body's factorisation gives it
-  cheaply or where the body has few master DOFs, else by one homogeneous body solve. A round
+  the per-interface correctors (or the sparse strip corrector) with a balancing coarse
+  correction of a few unknowns per body (its constants for T and φ, its rigid motions for
+  u), as in balancing domain decomposition (Mandel 1993). ``S^α`` is applied as a dense
+  matrix where the body's factorisation gives it cheaply or where the body has few master
+  DOFs, else by one homogeneous body solve. A round
   of body solves then checks the true residual, and refines if round-off left it short.
 
 The solve stops when every interface's master residual is below ``rtol`` times its flux scale
