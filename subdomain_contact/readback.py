@@ -527,8 +527,8 @@ def bulk_heat(system: System) -> dict[str, float]:
     for name, body in system.bodies.items():
         if body.forms.sources is None:
             continue
-        part = -_assembled(body, "sources", body.forms.sources)[_dofs(body, "temperature", None)]
-        part = part.sum()
+        dofs = _dofs(body, "temperature", None)
+        part = -_assembled(body, "sources", body.forms.sources)[dofs].sum()
         local[name] = _once(system, body.comm.allreduce(part, op=MPI.SUM))
     return {name: system.comm.allreduce(value, op=MPI.SUM) for name, value in local.items()}
 

@@ -78,6 +78,11 @@ def monolithic(system):
     return result
 
 
+def interface_operator(solver) -> np.ndarray:
+    """``S`` of a set-up :class:`~subdomain_contact.Subdomains`, dense, column by column."""
+    return np.column_stack([solver.apply(e) for e in np.eye(solver.size)])
+
+
 def preconditioned_condition(problem, *, coarse: bool) -> float:
     """κ(P S) of the interface problem: S and its preconditioner P formed column by column."""
     with sc.System(problem) as system:
@@ -85,8 +90,7 @@ def preconditioned_condition(problem, *, coarse: bool) -> float:
         system.assemble_jacobian()
         solver = sc.Subdomains(krylov=True, coarse=coarse)
         solver.setup(system)
-        unit = np.eye(solver.size)
-        S = np.column_stack([solver.apply(e) for e in unit])
-        P = np.column_stack([solver.precondition(e) for e in unit])
+        S = interface_operator(solver)
+        P = np.column_stack([solver.precondition(e) for e in np.eye(solver.size)])
     eigenvalues = scipy.linalg.eigvalsh(0.5 * (S + S.T), np.linalg.inv(0.5 * (P + P.T)))
     return float(eigenvalues.max() / eigenvalues.min())

@@ -2,7 +2,14 @@
 
 import numpy as np
 import pytest
-from helpers import linear_solve, monolithic, preconditioned_condition, release, snapshot
+from helpers import (
+    interface_operator,
+    linear_solve,
+    monolithic,
+    preconditioned_condition,
+    release,
+    snapshot,
+)
 from mpi4py import MPI
 
 import subdomain_contact as sc
@@ -52,7 +59,7 @@ def test_cg_on_floating_chain_equals_monolithic(chain, h):
     # whose condition grows with h̄ (in units of the bodies' k/L = 1): it differs from
     # over-solved answers by 2e-15, 4e-14, 4e-12, 8e-8 at h = 1e-4 … 1e8, at most 8 eps h
     # above h = 1, bounded here by 1e-12 + 100 eps h. Measured 3e-15, 1.5e-12, 4e-12, 8e-8.
-    S = np.column_stack([solver.apply(e) for e in np.eye(solver.size)])
+    S = interface_operator(solver)
     stopped = np.linalg.cond(S[np.ix_(solver.active, solver.active)]) * result.history[-1]
     assert difference_from_monolithic(system) <= stopped + 1e-12 + 100 * EPS * h
     # the coarse correction is balanced: the preconditioner inverts S on the coarse space,
@@ -183,8 +190,7 @@ def test_a_strip_that_holds_every_body_whole_is_the_exact_corrector(chain, h):
     solver = sc.Subdomains(sc.SparseStrip(layers=10), krylov=True)
     system, result = linear_solve(stack(chain, h=h), solver=solver)
     assert solver.strip.whole == bodies and solver.coarse_matrix is None
-    unit = np.eye(solver.size)
-    S = np.column_stack([solver.apply(e) for e in unit])
+    S = interface_operator(solver)
     PS = np.column_stack([solver.precondition(c) for c in S.T])
     # P S = I but for the round-off of applying S, ε ‖D‖ / ‖S‖ (D, the half-link's block,
     # grows with h) times cond(S), as in the test of the strip against its dense form;
@@ -196,7 +202,7 @@ def test_a_strip_that_holds_every_body_whole_is_the_exact_corrector(chain, h):
         for k in body.layers
     )
     loss = max(1.0, system.comm.allreduce(link, op=MPI.MAX) / singular[0])
-    defect = np.abs(PS - unit).max()
+    defect = np.abs(PS - np.eye(solver.size)).max()
     assert defect <= 10 * EPS * loss * singular[0] / singular[-1]
     # one iteration leaves that defect of the residual, a second its square, below the
     # tolerance 1e-10 since defect < 1e-5; measured [1], [2], [2]
