@@ -14,13 +14,18 @@
 # `geo/preheat_slice.geo`: half a cell's width along one cathode block, from the centre line to
 # the shell, through the collector bar's middle plane. Six bodies (anode, coke bed, cathode
 # block, cast iron, collector bar, ramming paste), seven contacts, temperature T and potential
-# φ in each (thermo-electric; the mechanics of the slice are not coupled yet: contact
-# pressures are the loads stated below). A 2D slice of bodies of different widths out of its
-# plane: each body's equations are those of its real width (the block's 0.48 m; the slot's
-# 0.2 m for the cast iron, the bar's 0.16 m), i.e. its conductivities and heat capacity are
+# φ in each (thermo-electric; with `--mechanics` the displacements too, quasi-static, plane
+# strain in 2D: the contact pressures then follow the expansion of the parts; otherwise they
+# are the loads stated below). A 2D slice of bodies of different widths out of its plane: each
+# body's equations are those of its real width (the block's 0.48 m; the slot's 0.2 m for the
+# cast iron, the bar's 0.16 m), i.e. its conductivities, heat capacity and stiffness are
 # multiplied by that width, and each contact's conductances by the width it touches across
-# (the slot's three faces, the bar's three faces). Every integral is then the slice's own
-# (W, A), and the current through the half slice is half a block's: 300 kA / 28 / 2.
+# (the slot's three faces, the bar's three faces), its normal stiffness by the width its
+# in-plane force acts on (the slot's and the bar's top). Every integral is then the slice's
+# own (W, A, N), and the current through the half slice is half a block's: 300 kA / 28 / 2.
+# A slice is ill-suited to the mechanics (Richard et al., COM 2006, p. 16): the block stands
+# on the cast iron (the slice passes through the slot), the slot's sides are out of its
+# plane, and the cast iron's grip on the bar is missing; the 3D quarter has them.
 #
 # Materials and contact laws are data files under `data/` with their sources; the default
 # schedule (`data/preheat_schedule.csv`) ramps the line current from 20 % to 100 % in 24 h,
@@ -32,7 +37,8 @@
 # Run `python demos/demo_preheat.py` (`--small`: a coarse mesh and the first hours, for the
 # tests; `--quarter`: the 3D quarter of the slice, `geo/preheat_quarter.geo`, with its real
 # widths; `--coke 0.03`: a thicker bed; `--restart`: go on from the latest checkpoint;
-# `--no-study`: the base case only, not the 30 mm bed; `--size`, `--fine`: the mesh).
+# `--no-study`: the base case only, not the 30 mm bed; `--size`, `--fine`: the mesh;
+# `--mechanics`: the displacements too, and the contact pressures and openings in the report).
 
 import argparse
 import csv
@@ -54,7 +60,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import subdomain_contact as sc
-from subdomain_contact.physics import Convection, CurrentDensity, Potential, Problem
+from subdomain_contact.physics import (
+    Convection,
+    CurrentDensity,
+    Displacement,
+    Potential,
+    Problem,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "data"
@@ -76,6 +88,9 @@ parser.add_argument("--size", type=float, help="element size away from the conta
 parser.add_argument("--fine", type=float, help="element size on the contacts [m]")
 parser.add_argument(
     "--quarter", action="store_true", help="the 3D quarter (geo/preheat_quarter.geo)"
+)
+parser.add_argument(
+    "--mechanics", action="store_true", help="the displacements too: contact pressures"
 )
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
@@ -140,52 +155,108 @@ LOSS_BODY = {  # the body each loss group belongs to (for its width)
     "bar_end": "bar",
 }
 ANODE_PRESSURE = 1560.0 * 9.81 * 0.6  # Pa: an anode's weight on the bed, ρ g h (9.2 kPa)
+SLIP = 1e7  # Pa/m: the spring against slip of every contact (--mechanics; as the slot scene)
 
 
-def widened(value, width: float):
-    """A property (number or law (p, T)) of a slice of ``width`` [m] out of the plane."""
+def widened(value, width: float, pressed: float = 1.0):
+    """A property (number or law (p, T)) of a slice of ``width`` [m] out of the plane.
+
+    ``pressed`` [m]: the width whose force a contact's pressure in the slice carries (the
+    slice's pressure is ``pressed`` times the real one, which the law is given).
+    """
     if callable(value):
-        return lambda p, T: width * value(p, T)
+        return lambda p, T: width * value(p / pressed, T)
     return width * float(value)
 
 
-def material(path: Path, width: float) -> sc.Material:
-    """The thermo-electric part of a data file, for a body ``width`` [m] wide."""
-    m = sc.load_material(path, fields="TE")
+def material(path: Path, width: float, stress_free: float | None = None) -> sc.Material:
+    """A data file's material, for a body ``width`` [m] wide (its mechanics: --mechanics).
+
+    ``stress_free`` [K]: its temperature of zero thermal strain, default the file's.
+    """
+    fields = "TEu" if args.mechanics else "TE"
+    m = sc.load_material(path, fields=fields, stress_free_temperature=stress_free)
     return replace(
         m,
         conductivity=widened(m.conductivity, width),
         electrical_conductivity=widened(m.electrical_conductivity, width),
         density=width * m.density,
+        young=None if m.young is None else widened(m.young, width),
     )
 
 
-def contact(path: Path, width: float, pressure: float = 0.0) -> sc.Contact:
-    """A contact of a data file, across ``width`` [m], at the stated ``pressure`` [Pa]."""
+def contact(
+    path: Path,
+    width: float,
+    pressure: float = 0.0,
+    pressed: float | None = None,
+    stated: bool = False,
+) -> sc.Contact:
+    """A contact of a data file, across ``width`` [m].
+
+    Without the mechanics, its laws at the stated ``pressure`` [Pa]; with it, unilateral, its
+    slip held by a weak spring, its normal force carried by ``pressed`` [m] of the width
+    (default all of it; in 2D the bar's sides conduct but lie in the slice's plane), its laws
+    at the pressure computed (``stated``: still at the stated one).
+    """
     c = sc.load_contact(path)
+    laws = {
+        "conductance": widened(c.conductance, width),
+        "electrical_conductance": widened(c.electrical_conductance, width),
+    }
+    if stated or not args.mechanics:
+        laws = {name: at_pressure(law, pressure) for name, law in laws.items()}
+    if not args.mechanics:
+        return replace(c, **laws, normal=None, pressure=pressure)
+    pressed = width if pressed is None else pressed
+    if not stated:
+        laws = {
+            "conductance": widened(c.conductance, width, pressed),
+            "electrical_conductance": widened(c.electrical_conductance, width, pressed),
+        }
     return replace(
         c,
-        conductance=widened(c.conductance, width),
-        electrical_conductance=widened(c.electrical_conductance, width),
-        normal=None,
-        pressure=pressure,
+        **laws,
+        normal=sc.Penalty(pressed * c.normal.stiffness),
+        tangential="stuck",
+        slip_stiffness=pressed * SLIP,
     )
+
+
+def at_pressure(law, pressure: float):
+    """A law (p, T) evaluated at the stated ``pressure`` [Pa], whatever the contact's."""
+    if not callable(law):
+        return law
+    return lambda p, T: law(pressure, T)
 
 
 def slot_contact() -> sc.Contact:
-    """Cast iron / carbon over the slot's three faces: two sides (4 µΩ m²) and the top (8)."""
+    """Cast iron / carbon over the slot's three faces: two sides (4 µΩ m²) and the top (8).
+
+    With the mechanics, the top's pressure is the slice's; the sides, out of its plane, are
+    given the top's (their laws here do not depend on it).
+    """
     folder = DATA / "contacts"
     side = sc.load_contact(folder / "carbon_cast_iron_vertical_constant.toml")
     top = sc.load_contact(folder / "carbon_cast_iron_horizontal_constant.toml")
     sides, across = 2 * SLOT_H, WIDTH["cast_iron"]  # m of slot face per m of slot
+    pressed = across if args.mechanics else 1.0
 
     def both(a, b):
         a, b = sc.laws.as_law(a), sc.laws.as_law(b)
-        return lambda p, T: sides * a(p, T) + across * b(p, T)
+        return lambda p, T: sides * a(p / pressed, T) + across * b(p / pressed, T)
 
+    laws = {
+        "conductance": both(side.conductance, top.conductance),
+        "electrical_conductance": both(side.electrical_conductance, top.electrical_conductance),
+    }
+    if not args.mechanics:
+        return sc.Contact(**laws)
     return sc.Contact(
-        conductance=both(side.conductance, top.conductance),
-        electrical_conductance=both(side.electrical_conductance, top.electrical_conductance),
+        **laws,
+        normal=sc.Penalty(across * top.normal.stiffness),
+        tangential="stuck",
+        slip_stiffness=across * SLIP,
     )
 
 
@@ -214,7 +285,9 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
         "bar": "collector_bar_steel",
         "paste": "ramming_paste",
     }
-    materials = {b: material(folder / f"{f}.toml", WIDTH[b]) for b, f in files.items()}
+    materials = {
+        b: material(folder / f"{f}.toml", WIDTH[b], STRESS_FREE.get(b)) for b, f in files.items()
+    }
     bed = contacts_ / "coke_bed_carbon.toml"
     paste = contacts_ / "ramming_paste_bonded.toml"
     contacts = {
@@ -231,12 +304,46 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
         contacts["bar_paste"] = contact(paste, 1.0)
     else:  # the slot's three faces in one, the bar's three faces in one
         contacts["slot_top"] = slot_contact()
-        contacts["bar_top"] = contact(bar, 3 * BAR, BAR_PRESSURE)
-        contacts["bar_paste"] = contact(paste, 3 * BAR)
+        # the cast iron's grip on the bar is out of the slice: its conductance stays at
+        # the stated pressure
+        contacts["bar_top"] = contact(bar, 3 * BAR, BAR_PRESSURE, pressed=BAR, stated=True)
+        contacts["bar_paste"] = contact(paste, 3 * BAR, pressed=BAR)
     conditions = [CurrentDensity("stubs", current), Potential("bar_end", 0.0)] + [
         Convection(g, h * WIDTH[LOSS_BODY[g]], AMBIENT) for g, h in LOSSES.items()
     ]
+    if args.mechanics:
+        conditions += SUPPORTS
     return Problem(scene, materials, contacts, conditions)
+
+
+# The mechanics' supports (--mechanics), this model's choices: the centre line (and in 3D the
+# bar's middle plane and the plane between two blocks) are symmetry planes; the bar and the
+# block stand on the lining (2D: the bar alone, the slice passing through the slot); the
+# anodes' weight rests on the bed (a pressure on their top); the shell gives way (the ramming
+# paste's outer face is free). Every contact is stuck, its slip held by the weak spring SLIP.
+UP = 2 if args.quarter else 1
+# The cast iron is stress-free at its eutectic (its data file): cooled to the cold cell, it
+# grips the bar and leaves the slot's faces open. The 2D slice has no grip (the bar's sides are
+# out of its plane), and there the cast iron is taken stress-free at the start temperature.
+STRESS_FREE = {} if args.quarter else {"cast_iron": START}
+SUPPORTS = [
+    Displacement("symmetry", 0, 0.0),
+    Displacement("bottom", UP, 0.0),
+    sc.Pressure("stubs", ANODE_PRESSURE * BLOCK_WIDTH),
+    sc.Pressure("anode_cover", ANODE_PRESSURE * BLOCK_WIDTH),
+]
+if args.quarter:
+    SUPPORTS += [Displacement("symmetry_y", 1, 0.0), Displacement("block_side", 1, 0.0)]
+# the width [m] that carries each contact's normal force in the slice (its pressure there is
+# that width times the real one); the quarter has its real widths
+PRESSED = {
+    "anode_coke": BLOCK_WIDTH,
+    "coke_block": BLOCK_WIDTH,
+    "slot_top": WIDTH["cast_iron"],
+    "bar_top": 1.0 if args.quarter else BAR,
+    "slot_side": 1.0,
+    "bar_side": 1.0,
+}
 
 
 def load(coke: float) -> sc.Scene:
@@ -310,7 +417,16 @@ class Probes:
         heat = report["balance"]["heat"]
         generated = heat["generated"]  # the bulk's and the contacts' Joule heat
         lost = -sum(group["heat"] for group in report["groups"].values() if "heat" in group)
-        return {
+        pressures = {}  # the real ones (see PRESSED) [MPa]
+        if args.mechanics:
+            for k, width in PRESSED.items():
+                if k in report["contacts"]:
+                    row = report["contacts"][k]
+                    pressures[f"{k} mean pressure [MPa]"] = 1e-6 * row["mean pressure"] / width
+                    pressures[f"{k} max pressure [MPa]"] = 1e-6 * row["max pressure"] / width
+                    pressures[f"{k} open share"] = row["open share"]
+            pressures["force imbalance [relative]"] = report["balance"]["force"]["relative"]
+        return pressures | {
             "line current [kA]": 1e-3 * current * LINE_CURRENT / SLICE_CURRENT,
             "cathode surface mean T [K]": mean,
             "cathode surface min T [K]": float(T.min()),
@@ -460,7 +576,14 @@ report: dict = {
         "ambient [K]": AMBIENT,
         "start [K]": START,
         "anode pressure on the bed [Pa]": ANODE_PRESSURE,
-        "bar/cast iron pressure [Pa]": BAR_PRESSURE,
+        "bar/cast iron pressure [Pa]": "computed" if args.mechanics else BAR_PRESSURE,
+        "mechanics": {
+            "supports": [str(bc) for bc in SUPPORTS],
+            "slip spring [Pa/m]": SLIP,
+            "stress-free temperatures": "each material file's (cast iron: its eutectic)",
+        }
+        if args.mechanics
+        else None,
         "end point": f"mean cathode surface temperature {args.target} K, or {limit / HOUR} h",
         "schedule": str(args.schedule),
     },
@@ -510,7 +633,8 @@ if len(routes_run) == 2:
 report["seconds"] = time.perf_counter() - started
 if comm.rank == 0:
     (args.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
-    figure, axes = plt.subplots(2, 2, figsize=(12, 8))
+    rows_of_plots = 3 if args.mechanics else 2
+    figure, axes = plt.subplots(rows_of_plots, 2, figsize=(12, 4 * rows_of_plots))
     for key, r in report["runs"].items():
         if r["linear"] != "subdomain":
             continue  # the same curves
@@ -532,11 +656,21 @@ if comm.rank == 0:
         for part in ("coke bed", "coke contacts", "carbon"):
             axes[1, 1].plot(t, col(f"{part} share"), label=f"{key}, {part}")
         axes[1, 1].set_ylabel("share of the Joule heat")
+        if args.mechanics:
+            for k in PRESSED:
+                if f"{k} mean pressure [MPa]" in rows[0]:
+                    axes[2, 0].plot(t, col(f"{k} mean pressure [MPa]"), label=f"{key}, {k}")
+                    axes[2, 1].plot(t, col(f"{k} open share"), label=f"{key}, {k}")
+            axes[2, 0].set_ylabel("mean contact pressure [MPa]")
+            axes[2, 0].set_yscale("symlog", linthresh=1e-3)
+            axes[2, 1].set_ylabel("share of the contact open")
     for ax in axes.flat:
         ax.set_xlabel("time [h]")
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    figure.suptitle("coke bed preheat, 2D slice along a cathode block")
+    figure.suptitle(
+        "coke bed preheat, " + ("3D quarter" if args.quarter else "2D slice along a cathode block")
+    )
     figure.tight_layout()
     figure.savefig(args.out / "preheat.png", dpi=110)
     plt.close(figure)

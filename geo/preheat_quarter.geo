@@ -15,8 +15,11 @@
 //   block_paste, iron_paste, bar_paste            ramming paste / block, cast iron, bar
 //   stubs, anode_cover, anode_sides, coke_sides, block_top, bottom, paste_top, sidewall,
 //   bar_surface, bar_end                          as in the 2D slice
-//   symmetry                                      x = 0 (the block); y = 0 and y = 0.24 are
-//                                                 symmetry planes too (no flux: unnamed)
+//   symmetry                                      x = 0 (the block)
+//   symmetry_y                                    y = 0, the bar's middle plane (every body)
+//   block_side                                    y = 0.24, the plane between two blocks
+//                                                 (block, paste, coke bed, anode); both
+//                                                 symmetry planes: no flux, and u_y = 0
 //
 // Parameters (override with load_scene(..., parameters={"size": 0.1})):
 DefineConstant[ size = 0.12 ];      // element size away from the contacts [m]
@@ -137,6 +140,10 @@ bare[] += found[];
 Physical Surface("block_top") = bare[];
 xp = 0; ya = 0; yb = width; za = 0; zb = height; Call PlaneX;
 Physical Surface("symmetry") = found[];
+yp = 0; xa = 0; xb = bar_end; za = 0; zb = y_top; Call PlaneY;
+Physical Surface("symmetry_y") = found[];
+yp = width; xa = 0; xb = half_length + paste_w; Call PlaneY;
+Physical Surface("block_side") = found[];
 zp = 0; xa = 0; xb = half_length + paste_w; ya = 0; yb = width; Call PlaneZ;
 Physical Surface("bottom") = found[];
 zp = height; xa = half_length; xb = half_length + paste_w; Call PlaneZ;

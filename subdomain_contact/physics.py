@@ -58,6 +58,7 @@ __all__ = [
     "Material",
     "Penalty",
     "Potential",
+    "Pressure",
     "Problem",
     "Schedule",
     "Temperature",
@@ -323,7 +324,20 @@ class Displacement:
     value: Data
 
 
-Condition = Temperature | HeatFlux | Convection | Potential | CurrentDensity | Displacement
+@dataclass(frozen=True)
+class Pressure:
+    """Neumann condition: a normal pressure [Pa] on a boundary group, the traction −p n.
+
+    Positive pushes into the body (a weight resting on it); a number or a :class:`Schedule`.
+    """
+
+    boundary: str
+    value: float | Schedule
+
+
+Condition = (
+    Temperature | HeatFlux | Convection | Potential | CurrentDensity | Displacement | Pressure
+)
 FIELD_OF: Mapping[type, str] = {
     Temperature: "temperature",
     HeatFlux: "temperature",
@@ -331,6 +345,7 @@ FIELD_OF: Mapping[type, str] = {
     Potential: "potential",
     CurrentDensity: "potential",
     Displacement: "displacement",
+    Pressure: "displacement",
 }
 #: The contact law that couples each field across an interface.
 _LAW_OF = {"temperature": "conductance", "potential": "electrical_conductance"}
@@ -870,7 +885,7 @@ def _neumann(
     ds: ufl.Measure,
     constant: Callable[[float | Schedule], Expr],
 ) -> dict[str, ufl.Form]:
-    """Boundary fluxes and convection [W, A], by boundary group."""
+    """Boundary fluxes, convection and pressures [W, A, N], by boundary group."""
     forms: dict[str, ufl.Form] = {}
     for bc in problem.conditions:
         if bc.boundary not in body.boundaries:
@@ -883,6 +898,9 @@ def _neumann(
         elif isinstance(bc, Convection):
             T, hc = u["temperature"], constant(bc.coefficient)  # a number or a Schedule
             form = hc * (T - constant(bc.ambient)) * v["temperature"] * dS
+        elif isinstance(bc, Pressure):  # the traction −p n, tested: −∫ t·v = ∫ p n·v
+            n = ufl.FacetNormal(body.mesh)
+            form = constant(bc.value) * ufl.dot(n, v["displacement"]) * dS
         else:
             continue
         forms[bc.boundary] = form if bc.boundary not in forms else forms[bc.boundary] + form

@@ -260,7 +260,9 @@ def summary(system: System) -> dict:
     ``balance`` (:func:`balance`); ``groups``: per boundary group with a condition, the
     ``current`` [A], ``heat`` [W], ``force`` [N] through it and its mean ``temperature`` [K]
     and ``potential`` [V], where the scene has the field; ``contacts``: per interface, the
-    current, heat and force across it, its contact Joule heat [W] and its mean pressure [Pa].
+    current, heat and force across it, its contact Joule heat [W], and with displacements its
+    ``mean pressure`` and ``max pressure`` [Pa] and its ``open share`` (the share of its
+    area where the gap is open).
     """
     reading = _Reading(system)
     fields = system.problem.fields
@@ -289,6 +291,8 @@ def summary(system: System) -> dict:
         if "displacement" in fields:
             row["force"] = _force(reading, k).tolist()
             row["mean pressure"] = float(np.sum(values["pressure"] * area) / area.sum())
+            row["max pressure"] = float(values["pressure"].max())
+            row["open share"] = float(area[values["gap"] > 0].sum() / area.sum())
     return {"balance": _balance(reading), "groups": groups, "contacts": contacts}
 
 

@@ -388,6 +388,41 @@ def test_demo_preheat(shared_tmp, monkeypatch, comm):
     assert report["ranks"] == comm.size
 
 
+def test_demo_preheat_mechanics(shared_tmp, monkeypatch, comm):
+    """The slice with its displacements, its first hour, under MPI: the routes agree in
+    every field, the anodes' weight rests on the bed, the forces balance. (Serially the
+    pressure load and the contact readings are tested in test_multiphysics: CI time.)"""
+    if comm.size == 1:
+        pytest.skip("the preheat's mechanics run under mpiexec (CI time)")
+    out = shared_tmp / "out_preheat_mechanics"
+    run_demo(demo("demo_preheat"), out, monkeypatch, "--mechanics", "--hours", "1")
+    comm.barrier()
+    report = json.loads((out / "report.json").read_text())
+    # both routes to rtol 1e-10 of each field's scale, the displacements' too (measured
+    # ≤ 5e-13 serially)
+    differences = report["routes"]["differences"]
+    assert all("displacement" in step for step in differences)
+    assert max(max(step.values()) for step in differences) < 1e-8
+    run = report["runs"]["coke 20 mm"]
+    assert run["end time [h]"] == pytest.approx(1.0, rel=1e-12)
+    assert run["max heat imbalance"] < 1e-8  # as without the mechanics
+    anode = 1560.0 * 9.81 * 0.6  # Pa: the anode's weight on its top (the demo's ANODE_PRESSURE)
+    for row in json.loads((out / "coke_20_mm" / "history.json").read_text())["rows"]:
+        # nothing else holds the anode up, and nothing but the anode weighs on the bed (its
+        # own weight and the block's are not loads): the mean pressure on both of the bed's
+        # faces is the anode's weight over its footprint, to what Newton's test allows. The
+        # anode's balance is a sum of residual entries, ≤ √n ‖F_u‖₂ ≤ √n 1e-10 × the
+        # displacements' scale (as assert_balanced_to_newton): n = 4,596 DOFs, the scale (the
+        # cold load of the thermal misfits) 1.7e4 times the weight: 1.2e-4 (measured 5e-14
+        # serially)
+        for face in ("anode_coke", "coke_block"):
+            assert row[f"{face} mean pressure [MPa]"] * 1e6 == pytest.approx(anode, rel=1.2e-4)
+            assert 0 <= row[f"{face} open share"] < 1
+        assert row["force imbalance [relative]"] < 1e-8
+        assert row["slot_top max pressure [MPa]"] >= row["slot_top mean pressure [MPa]"] >= 0
+    assert (out / "preheat.png").stat().st_size > 10_000
+
+
 def test_demo_preheat_quarter(shared_tmp, monkeypatch, comm):
     """The 3D quarter of the slice, its first hour, under MPI: the routes agree, the balances
     close. (Serially the demo's code is the 2D slice's, tested above: CI time.)"""

@@ -180,6 +180,7 @@ def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
     if heating > 0:
         assert exact.pressure(heating) > 1e8
         assert force[0] / 0.1 == pytest.approx(exact.pressure(heating), rel=1e-9)
+        assert sc.summary(system)["contacts"]["contact"]["open share"] == 0.0
     else:
         # open: no force at all, to the solver's tolerance relative to the force the walls
         # would need to hold the blocks' whole contraction, E α |ΔT| / (1 − ν) × 0.1 m
@@ -189,6 +190,7 @@ def test_thermal_expansion_pressure_and_gap(bars, comm, temperature):
         assert np.abs(sc.force(system, "left")).max() <= 1e-12 * held
         # the free contraction (1 + ν) α ΔT L per block, exactly
         assert gap == pytest.approx(1e-4 + 1.3 * 1.2e-5 * 50.0, rel=1e-12)
+        assert sc.summary(system)["contacts"]["contact"]["open share"] == 1.0
     assert gap == pytest.approx(exact.gap_width(heating), rel=1e-9)
 
 
@@ -668,3 +670,48 @@ def test_a_weak_slip_spring_carries_its_own_force(bars, comm):
     )
     with pytest.raises(ValueError, match=r"slip_stiffness = -1\.0"):
         make_system(dataclasses.replace(problem, contacts={"contact": negative}))
+
+
+@pytest.mark.parametrize("linear", ["subdomain", "monolithic"])
+def test_a_pressure_load_squeezes_the_bars_uniformly(bars, comm, linear):
+    """Bar A held at x = 0, both on rollers at y = 0, a pressure p on bar B's right end: plane
+    strain under the uniaxial stress σ_xx = −p, so u_x(1 m) = −p (1 − ν²) / E × 1 m − p / k_n
+    (the bars, and the penalty's closure δ = p / k_n); the contact carries p × 0.1 m, the
+    support gives it back, and the force balance closes with the load's group in it.
+
+    P1 holds the uniform strain exactly: what is left is the Newton tolerance (1e-12) times
+    the condition of the bars' stiffness against the penalty's (k_n h / E ≈ 6), far below
+    the 1e-9 asked (measured 2e-15)."""
+    E, nu, k_n, p = 200e9, 0.3, 1e13, 1e7
+    steel = Material(conductivity=45.0, young=E, poisson=nu)
+    problem = Problem(
+        bars,
+        {"plate_A": steel, "plate_B": steel},
+        {"contact": Contact(conductance=1e4, normal=Penalty(k_n))},
+        [
+            Temperature("left", 300.0),
+            Displacement("left", 0, 0.0),
+            Displacement("bottom", 1, 0.0),
+            sc.Pressure("right", p),
+        ],
+    )
+    system = make_system(problem)
+    system.reset({"temperature": 300.0})
+    sc.solve(system, linear=LINEAR[linear](), rtol=1e-12)
+    local = np.zeros(2)
+    if "plate_B" in system.bodies:
+        points, values = system.bodies["plate_B"].nodal("displacement", 0)
+        on = np.isclose(points[:, 0], 1.0)
+        local = np.array([values[on].sum(), on.sum()])
+    total = comm.allreduce(local, op=MPI.SUM)
+    end = total[0] / total[1]
+    assert end == pytest.approx(-p * (1 - nu**2) / E - p / k_n, rel=1e-9)
+    assert sc.force(system, "contact")[0] == pytest.approx(p * 0.1, rel=1e-9)
+    assert sc.force(system, "left")[0] == pytest.approx(p * 0.1, rel=1e-9)
+    forces = sc.balance(system)["force"]
+    assert forces["groups"]["right"][0] == pytest.approx(-p * 0.1, rel=1e-9)
+    assert forces["relative"] < 1e-9
+    row = sc.summary(system)["contacts"]["contact"]
+    assert row["mean pressure"] == pytest.approx(p, rel=1e-9)
+    assert row["max pressure"] == pytest.approx(p, rel=1e-9)
+    assert row["open share"] == 0.0
