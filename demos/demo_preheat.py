@@ -92,7 +92,16 @@ parser.add_argument(
 parser.add_argument(
     "--mechanics", action="store_true", help="the displacements too: contact pressures"
 )
+parser.add_argument(
+    "--slot-law",
+    choices=("constant", "pressure"),
+    default="constant",
+    help="cast iron/carbon: the constant resistances of slot models, or the law of p and T "
+    "(the 3D quarter with --mechanics)",
+)
 args = parser.parse_args()
+if args.slot_law == "pressure" and not (args.quarter and args.mechanics):
+    parser.error("--slot-law pressure needs --quarter --mechanics (the pressure on the slot)")
 comm = MPI.COMM_WORLD
 started = time.perf_counter()
 
@@ -298,8 +307,14 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
     }
     bar = contacts_ / "steel_cast_iron.toml"  # at an assumed pressure
     if args.quarter:  # each face on its own
-        contacts["slot_side"] = contact(contacts_ / "carbon_cast_iron_vertical_constant.toml", 1)
-        contacts["slot_top"] = contact(contacts_ / "carbon_cast_iron_horizontal_constant.toml", 1)
+        if args.slot_law == "pressure":  # open where the pressure vanishes
+            law = contacts_ / "carbon_cast_iron_pressure.toml"
+            contacts["slot_side"] = contacts["slot_top"] = contact(law, 1.0)
+        else:
+            side = contacts_ / "carbon_cast_iron_vertical_constant.toml"
+            contacts["slot_side"] = contact(side, 1.0)
+            top = contacts_ / "carbon_cast_iron_horizontal_constant.toml"
+            contacts["slot_top"] = contact(top, 1.0)
         contacts["bar_side"] = contacts["bar_top"] = contact(bar, 1.0, BAR_PRESSURE)
         contacts["bar_paste"] = contact(paste, 1.0)
     else:  # the slot's three faces in one, the bar's three faces in one
@@ -426,8 +441,13 @@ class Probes:
                     pressures[f"{k} max pressure [MPa]"] = 1e-6 * row["max pressure"] / width
                     pressures[f"{k} open share"] = row["open share"]
             pressures["force imbalance [relative]"] = report["balance"]["force"]["relative"]
+        # the block's current leaves through the slot's faces or the ramming paste
+        slot = sum(abs(c["current"]) for k, c in report["contacts"].items() if "slot" in k)
         return pressures | {
             "line current [kA]": 1e-3 * current * LINE_CURRENT / SLICE_CURRENT,
+            "slot faces current share": slot / current,
+            "ramming paste current share": abs(report["contacts"]["block_paste"]["current"])
+            / current,
             "cathode surface mean T [K]": mean,
             "cathode surface min T [K]": float(T.min()),
             "cathode surface max T [K]": float(T.max()),

@@ -78,7 +78,7 @@ def heat(system: System, group: str) -> float:
 
 
 def force(system: System, group: str) -> Vector:
-    """Force [N] the supports of a boundary group exert on the bodies, per component.
+    """Force [N] the supports or the loads of a boundary group exert on the bodies, per component.
 
     Across an interface: the force the first body exerts on the second, in the components
     the contact carries (the normal one alone when it slides freely).
@@ -161,8 +161,8 @@ def balance(system: System) -> dict[str, dict]:
     ``imbalance = in − out + generated − stored``, ``scale`` and ``relative = |imbalance| /
     scale``.
     ``"current"`` [A]: the same without generation. ``"force"`` [N]: the reactions of each
-    group with a displacement condition, their ``sum`` per component (no loads but the
-    supports: it must vanish), ``scale`` and ``relative``.
+    group with a displacement or pressure condition (supports and loads), their ``sum`` per
+    component (it must vanish), ``scale`` and ``relative``.
 
     The scale is the larger of the flows and of the field's *cold load*, the 1-norm of its
     residual with every unknown zero but the Dirichlet values: what the supports would carry
