@@ -342,12 +342,17 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
     assert report["ranks"] == comm.size
 
 
+def preheat(shared_tmp, monkeypatch, comm, folder: str, *extra) -> tuple:
+    """The preheat demo at ``--small`` with ``extra`` into ``folder``: the folder, its report."""
+    out = shared_tmp / folder
+    run_demo(demo("demo_preheat"), out, monkeypatch, *extra)
+    comm.barrier()
+    return out, json.loads((out / "report.json").read_text())
+
+
 def test_demo_preheat(shared_tmp, monkeypatch, comm):
     """The first 6 h of a coke bed preheat: both routes equal per step, every step balanced."""
-    out = shared_tmp / "out_preheat"
-    run_demo(demo("demo_preheat"), out, monkeypatch)
-    comm.barrier()
-    report = json.loads((out / "report.json").read_text())
+    out, report = preheat(shared_tmp, monkeypatch, comm, "out_preheat")
     # subdomain and monolithic Newton, the first three steps: both to rtol 1e-10 of each
     # field's scale, so they agree to a few times that (measured ≤ 4e-15)
     routes = report["routes"]["differences"]
@@ -408,10 +413,8 @@ def test_demo_preheat_mechanics(shared_tmp, monkeypatch, comm):
     pressure load and the contact readings are tested in test_multiphysics: CI time.)"""
     if comm.size == 1:
         pytest.skip("the preheat's mechanics run under mpiexec (CI time)")
-    out = shared_tmp / "out_preheat_mechanics"
-    run_demo(demo("demo_preheat"), out, monkeypatch, "--mechanics", "--hours", "1")
-    comm.barrier()
-    report = json.loads((out / "report.json").read_text())
+    flags = ("--mechanics", "--hours", "1")
+    out, report = preheat(shared_tmp, monkeypatch, comm, "out_preheat_mechanics", *flags)
     # both routes to rtol 1e-10 of each field's scale, the displacements' too (measured
     # ≤ 9.3e-11 serially)
     differences = report["routes"]["differences"]
@@ -442,10 +445,8 @@ def test_demo_preheat_quarter(shared_tmp, monkeypatch, comm):
     close. (Serially the demo's code is the 2D slice's, tested above: CI time.)"""
     if comm.size == 1:
         pytest.skip("the 3D quarter runs under mpiexec; its code is the 2D slice's")
-    out = shared_tmp / "out_preheat_quarter"
-    run_demo(demo("demo_preheat"), out, monkeypatch, "--quarter", "--hours", "1")
-    comm.barrier()
-    report = json.loads((out / "report.json").read_text())
+    flags = ("--quarter", "--hours", "1")
+    _, report = preheat(shared_tmp, monkeypatch, comm, "out_preheat_quarter", *flags)
     # both routes to rtol 1e-10 of each field's scale (as the 2D slice; measured ≤ 1e-14)
     assert max(max(step.values()) for step in report["routes"]["differences"]) < 1e-8
     run = report["runs"]["coke 20 mm"]
