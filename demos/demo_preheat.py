@@ -209,20 +209,14 @@ def contact(
     at the pressure computed (``stated``: still at the stated one).
     """
     c = sc.load_contact(path)
-    laws = {
-        "conductance": widened(c.conductance, width),
-        "electrical_conductance": widened(c.electrical_conductance, width),
-    }
-    if stated or not args.mechanics:
-        laws = {name: at_pressure(law, pressure) for name, law in laws.items()}
+    pressed = width if pressed is None else pressed
+    computed = args.mechanics and not stated  # the laws see the slice's pressure
+    laws = {}
+    for name in ("conductance", "electrical_conductance"):
+        law = widened(getattr(c, name), width, pressed if computed else 1.0)
+        laws[name] = law if computed else at_pressure(law, pressure)
     if not args.mechanics:
         return replace(c, **laws, normal=None, pressure=pressure)
-    pressed = width if pressed is None else pressed
-    if not stated:
-        laws = {
-            "conductance": widened(c.conductance, width, pressed),
-            "electrical_conductance": widened(c.electrical_conductance, width, pressed),
-        }
     return replace(
         c,
         **laws,
