@@ -211,12 +211,14 @@ def contact(
     c = sc.load_contact(path)
     pressed = width if pressed is None else pressed
     computed = args.mechanics and not stated  # the laws see the slice's pressure
-    laws = {}
-    for name in ("conductance", "electrical_conductance"):
-        law = widened(getattr(c, name), width, pressed if computed else 1.0)
-        laws[name] = law if computed else at_pressure(law, pressure)
-    if not args.mechanics:
+    laws = {
+        name: widened(getattr(c, name), width, pressed if computed else 1.0)
+        for name in ("conductance", "electrical_conductance")
+    }
+    if not args.mechanics:  # the laws see Contact.pressure
         return replace(c, **laws, normal=None, pressure=pressure)
+    if stated:  # a displacement field, but laws held at the stated pressure
+        laws = {name: at_pressure(law, pressure) for name, law in laws.items()}
     return replace(
         c,
         **laws,
@@ -315,7 +317,8 @@ def problem(scene: sc.Scene, current: sc.Schedule) -> Problem:
         contacts["slot_top"] = slot_contact()
         # the cast iron's grip on the bar is out of the slice: its conductance stays at
         # the stated pressure
-        contacts["bar_top"] = contact(bar, 3 * BAR, BAR_PRESSURE, pressed=BAR, stated=True)
+        bar_top = contact(bar, 3 * BAR, BAR_PRESSURE, pressed=PRESSED["bar_top"], stated=True)
+        contacts["bar_top"] = bar_top
         contacts["bar_paste"] = contact(paste, 3 * BAR, pressed=BAR)
     conditions = [CurrentDensity("stubs", current), Potential("bar_end", 0.0)] + [
         Convection(g, h * WIDTH[LOSS_BODY[g]], AMBIENT) for g, h in LOSSES.items()
