@@ -40,7 +40,6 @@ import dolfinx
 import dolfinx.fem.petsc
 import numpy as np
 import numpy.typing as npt
-import scipy.linalg
 import scipy.sparse
 import ufl
 from mpi4py import MPI
@@ -332,7 +331,6 @@ class Body:
             d = self.scale[self.kept_local]
             scaled = d[:, None] * self.L_bc.toarray() * d[None, :]
             self.factor.update(scaled)
-            self.T_lu = scipy.linalg.lu_factor(self.factor.sigma + scaled)
         elif self._bulk_changed or not self.links_are_linear or self.ksp is None:
             self._factorise_whole()
 
@@ -788,7 +786,7 @@ class Body:
     def _solve_kept(self, rhs_s: Matrix) -> Matrix:
         """``(Σ + L)⁻¹ rhs_s`` by the scaled dense factorisation of the Schur block."""
         d = self.scale[self.kept_local][:, None]
-        return d * scipy.linalg.lu_solve(self.T_lu, d * rhs_s)
+        return d * self.factor.solve_block(d * rhs_s)
 
     def _solve_columns(self, rhs_s: Matrix) -> tuple[Matrix, Matrix]:
         """Body solves for right-hand sides on the contact DOFs: ``y_s`` and ``(A_bulk y)_s``."""

@@ -35,6 +35,7 @@ _SIGNATURES = {
     "MatDenseGetLDA": (_handle, ctypes.c_void_p),
     "MatDenseGetArray": (_handle, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))),
     "MatDenseRestoreArray": (_handle, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))),
+    "MatMatSolve": (_handle, _handle, _handle),
 }
 
 
@@ -162,6 +163,26 @@ class CondensedFactor:
         _call("MatDenseRestoreArray", S, ctypes.byref(values))
         _call("MatFactorRestoreSchurComplement", self.F.handle, ctypes.byref(S), _UNFACTORED)
         return held
+
+    def solve_block(self, rhs: Matrix) -> Matrix:
+        """``(Σ + H)⁻¹ rhs`` for columns on the kept rows, by the block's own factorisation.
+
+        The LU that :meth:`update` made (LAPACK, inside PETSc) solves every column at once
+        (``MatMatSolve``): the dense block is factorised once per update.
+        """
+        S, status = _handle(), _int()
+        _call("MatFactorGetSchurComplement", self.F.handle, ctypes.byref(S), ctypes.byref(status))
+        columns = rhs.shape[1]
+        comm = PETSc.COMM_SELF
+        B = PETSc.Mat().createDense((self.size, columns), array=np.asfortranarray(rhs), comm=comm)
+        X = PETSc.Mat().createDense((self.size, columns), comm=comm)
+        try:
+            _call("MatMatSolve", S, B.handle, X.handle)
+            return X.getDenseArray(readonly=True).copy()
+        finally:
+            _call("MatFactorRestoreSchurComplement", self.F.handle, ctypes.byref(S), status.value)
+            B.destroy()
+            X.destroy()
 
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """``x = (K + H)⁻¹ b``.
