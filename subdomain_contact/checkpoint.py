@@ -31,7 +31,13 @@ Vector = npt.NDArray[np.float64]
 KEEP = 2
 
 
-def save(directory: str | Path, system: System, clock: dict, arrays: dict[str, list[dict]]) -> Path:
+def save(
+    directory: str | Path,
+    system: System,
+    clock: dict,
+    arrays: dict[str, list[dict]],
+    master_arrays: dict[str, list[dict]] | None = None,
+) -> Path:
     """Write a checkpoint of the system's state (collective); returns its folder.
 
     Args:
@@ -40,6 +46,8 @@ def save(directory: str | Path, system: System, clock: dict, arrays: dict[str, l
         clock: JSON-ready numbers of the stepper (``steps`` names the folder).
         arrays: Extra per-body arrays shaped like a body's state (the stepper's past states),
             by name: a list of ``{body: array}``.
+        master_arrays: Extra arrays shaped like the masters (their past values), by name: a
+            list of ``{interface: array}``.
     """
     directory = Path(directory)
     final = directory / f"step_{clock['steps']:06d}"
@@ -70,6 +78,9 @@ def save(directory: str | Path, system: System, clock: dict, arrays: dict[str, l
     comm.barrier()  # every group's root has written its bodies
     if comm.rank == 0:
         masters = {f"{k}_values": v for k, v in system.masters.items()}
+        for label, past in (master_arrays or {}).items():
+            for i, values in enumerate(past):
+                masters |= {f"{label}.{i}.{k}": v for k, v in values.items()}
         points = {f"{k}_points": layer.coordinates for k, layer in system.layers.items()}
         np.savez(partial / "masters.npz", **masters, **points)
         (partial / "clock.json").write_text(json.dumps(clock))
@@ -90,7 +101,7 @@ def latest(directory: str | Path, comm: MPI.Comm) -> Path | None:
     return None if name is None else Path(directory) / name
 
 
-def load(folder: str | Path, system: System) -> tuple[dict, dict]:
+def load(folder: str | Path, system: System) -> tuple[dict, dict, dict]:
     """Put a checkpoint's state into the system (collective).
 
     Args:
@@ -98,8 +109,9 @@ def load(folder: str | Path, system: System) -> tuple[dict, dict]:
         system: A system of the same scene and problem (any number of ranks, any placement).
 
     Returns:
-        The clock, and the extra arrays as ``{label: [{body: array}]}`` (each body's local
-        entries, ghosts included), as many of each label as were saved.
+        The clock; the extra arrays as ``{label: [{body: array}]}`` (each body's local
+        entries, ghosts included), as many of each label as were saved; the extra master
+        arrays as ``{label: [{interface: array}]}``.
 
     Raises:
         ValueError: A checkpoint of another scene (its nodes or fields are not this one's).
@@ -129,17 +141,27 @@ def load(folder: str | Path, system: System) -> tuple[dict, dict]:
     messages = [m for m in system.comm.allgather(failure) if m]
     if messages:
         raise ValueError(f"{messages[0]}: restart from a checkpoint of the same scene")
+    master_extra: dict[str, list[dict]] = {}
     with np.load(folder / "masters.npz") as data:
-        masters = {}
+        indices = {}
         for k, layer in system.layers.items():
             what = f"{folder}: interface '{k}'"
-            index = match_points(data[f"{k}_points"], layer.coordinates, what=what)
-            values = data[f"{k}_values"].reshape(-1, len(index))
-            masters[k] = values[:, index].ravel()
+            indices[k] = match_points(data[f"{k}_points"], layer.coordinates, what=what)
+
+        def read(key: str, k: str) -> npt.NDArray[np.float64]:
+            return data[key].reshape(-1, len(indices[k]))[:, indices[k]].ravel()
+
+        masters = {k: read(f"{k}_values", k) for k in indices}
+        for key in data.files:  # the extras: "<label>.<i>.<interface>"
+            parts = key.split(".", 2)
+            if len(parts) == 3 and parts[1].isdigit() and parts[2] in indices:
+                past = master_extra.setdefault(parts[0], [])
+                past.extend({} for _ in range(int(parts[1]) + 1 - len(past)))
+                past[int(parts[1])][parts[2]] = read(key, parts[2])
     system.masters = masters
     for body in system.bodies.values():
         body.set_masters(masters)
-    return clock, extra
+    return clock, extra, master_extra
 
 
 def _keys(body: Body) -> npt.NDArray[np.int64]:

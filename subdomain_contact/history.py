@@ -117,8 +117,8 @@ class History:
 
     def _resume(self, folder: Path) -> None:
         stepper = self.stepper
-        numbers, arrays = checkpoint.load(folder, stepper.system)
-        stepper.set_clock(numbers, arrays.get("past", []))
+        numbers, arrays, master_arrays = checkpoint.load(folder, stepper.system)
+        stepper.set_clock(numbers, arrays.get("past", []), master_arrays.get("past"))
         self._wall = numbers["wall"]
         rows = json.loads((self.directory / "history.json").read_text())["rows"]
         self.rows = [row for row in rows if row["step"] <= stepper.steps]
@@ -197,7 +197,13 @@ class History:
         numbers = stepper.clock() | {"wall": self._wall + clock.perf_counter() - self._start}
         past = {"past": [states for _, states in stepper.past]}
         self._saved = stepper.steps
-        return checkpoint.save(self.directory / "checkpoints", stepper.system, numbers, past)
+        return checkpoint.save(
+            self.directory / "checkpoints",
+            stepper.system,
+            numbers,
+            past,
+            {"past": stepper.past_masters},
+        )
 
     # -- files ----------------------------------------------------------------------------
     def _vtk_folder(self, step: int) -> Path:
