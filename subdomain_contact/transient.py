@@ -183,7 +183,7 @@ class Stepper:
 
         Kept only where every law is in its range at the predicted state.
         """
-        if not self.past or len(self.past_masters) < 1:
+        if not self.past_masters:  # the first step, or a checkpoint without them
             return
         (before, states), masters = self.past[0], self.past_masters[0]
         weight = step / (self.time - before)
