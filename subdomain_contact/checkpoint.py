@@ -158,9 +158,7 @@ def load(folder: str | Path, system: System) -> tuple[dict, dict, dict]:
                 past = master_extra.setdefault(parts[0], [])
                 past.extend({} for _ in range(int(parts[1]) + 1 - len(past)))
                 past[int(parts[1])][parts[2]] = read(key, parts[2])
-    system.masters = masters
-    for body in system.bodies.values():
-        body.set_masters(masters)
+    system.set_masters(masters)
     return clock, extra, master_extra
 
 

@@ -282,10 +282,15 @@ class System:
             body.U.x.array[:] = 0.0
             for field, value in initial.items():
                 body.U.x.array[body.forms.collapsed(field)[1]] = value
-        self.masters = {}
+        masters = {}
         for k, layer in self.layers.items():
             values = [initial.get(f, 0.0) for f, _ in layer.channels]
-            self.masters[k] = np.repeat(values, layer.nodes).astype(float) * self.active[k]
+            masters[k] = np.repeat(values, layer.nodes).astype(float) * self.active[k]
+        self.set_masters(masters)
+
+    def set_masters(self, masters: Mapping[str, Vector]) -> None:
+        """Take the master values (interface -> replicated vector; kept, not copied)."""
+        self.masters = dict(masters)
         for body in self.bodies.values():
             body.set_masters(self.masters)
 
@@ -369,9 +374,7 @@ class System:
         for name, body in self.bodies.items():
             body.U.x.array[: body.size] = array[self.slices[name]]
             body.U.x.scatter_forward()
-        self.masters = self.split_masters(array[self.master_slice])
-        for body in self.bodies.values():
-            body.set_masters(self.masters)
+        self.set_masters(self.split_masters(array[self.master_slice]))
 
     def difference(self, a: PETSc.Vec, b: PETSc.Vec) -> dict[str, float]:
         """Per field, ``max |a − b| / max |b|`` over every body and master value (collective)."""

@@ -190,19 +190,13 @@ class Stepper:
         system = self.system
         for name, body in system.bodies.items():
             body.U.x.array[:] += weight * (body.U.x.array - states[name])
-        predicted = {k: v + weight * (v - masters[k]) for k, v in system.masters.items()}
-        self._set_masters(predicted)
+        system.set_masters({k: v + weight * (v - masters[k]) for k, v in system.masters.items()})
         try:
             system.check_laws("at the predicted state")
         except LawRangeError:
             for name, body in system.bodies.items():
                 body.U.x.array[:] = self._undo[0][name]
-            self._set_masters(self._undo[1])
-
-    def _set_masters(self, masters: dict[str, Vector]) -> None:
-        self.system.masters = {k: v.copy() for k, v in masters.items()}
-        for body in self.system.bodies.values():
-            body.set_masters(self.system.masters)
+            system.set_masters({k: v.copy() for k, v in self._undo[1].items()})
 
     def undo(self) -> None:
         """Put back the state before the latest step (once)."""
@@ -214,7 +208,7 @@ class Stepper:
             body.U.x.array[:] = states[name]  # ghosts included
             for h, values in zip(body.forms.history, history[name], strict=True):
                 h.x.array[:] = values
-        self._set_masters(masters)
+        system.set_masters(masters)
         self.time, self.steps, self._last, self.past, self.past_masters = clock
         system.set_time(self.time)
         self._undo = None
