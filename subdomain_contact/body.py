@@ -49,7 +49,7 @@ from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave
 from subdomain_contact.modes import modes
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
-from subdomain_contact.schur import CondensedFactor
+from subdomain_contact.schur import CondensedFactor, keeps_block
 from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp, ordered, ordering
 
 __all__ = ["ITERATIVE", "SPLIT", "SPLIT_FIELD", "Body"]
@@ -94,25 +94,6 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
 #: field's residual is above the tolerance relative to its own scale.
 FIELD_REFINEMENTS = 3
 
-#: Contact DOFs up to which a body always keeps them as a dense Schur block (its dense
-#: algebra costs less than 0.1 s).
-SCHUR_SMALL = 1000
-
-#: Above :data:`SCHUR_SMALL`, a body keeps its contact DOFs as a dense Schur block only while
-#: they are at most this share of its DOFs (and at most :data:`SCHUR_LIMIT`); otherwise it is
-#: factorised whole and its ``S^α`` applied by a body solve. The dense block's factorisation
-#: and response grow as its size cubed, the sparse factorisation far slower. Measured, Newton
-#: from 300 K, T, φ, u: the collector bar slot (contact shares 45, 95, 58 %; 2.3k, 4.2k, 1.8k
-#: contact DOFs) 1 258 s with every body's Schur block, 4.7 s per step with the cast iron
-#: alone whole, 11.4 s for 10 steps with every body whole (monolithic: 8.2 s); the row of
-#: four 3D blocks (shares 6–12 %, up to 975 contact DOFs) 21.7 s with Schur blocks, 27.7 s
-#: whole.
-SCHUR_FRACTION = 0.25
-
-#: Contact DOFs above which a body gets no Schur block: the block, its LU and the body's
-#: ``S^α`` hold about 3 n² doubles, 1.5 GB at n = 8000.
-SCHUR_LIMIT = 8000
-
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
 MasterValues = dict[str, npt.NDArray[np.float64]]
@@ -133,7 +114,7 @@ class Body:
         layers: Master layer of each interface the body touches, in scene order.
         prefix: PETSc options prefix of the body's factorisation (``<prefix>mat_mumps_*``).
         schur: Factorise with the contact DOFs left as a dense Schur block (a body on one
-            rank only, with few contact DOFs: :data:`SCHUR_FRACTION`);
+            rank only, with few contact DOFs: :func:`~subdomain_contact.schur.keeps_block`);
             otherwise the whole body matrix is factorised.
         iterative: Solve the body by Krylov + AMG (:data:`ITERATIVE`, options under
             ``prefix``) instead of a factorisation.
@@ -169,7 +150,7 @@ class Body:
         self._compile()
         self.iterative = iterative
         contact = len(self.kept)
-        few = contact <= SCHUR_SMALL or contact <= min(SCHUR_FRACTION * self.size, SCHUR_LIMIT)
+        few = keeps_block(contact, self.size)
         self.schur = schur and not iterative and self.comm.size == 1 and 0 < contact and few
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None

@@ -23,6 +23,12 @@ import numpy.typing as npt
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
+from subdomain_contact.schur import factorisation_work, keeps_block
+
+#: Unknowns per node that the placement of bodies on ranks counts with (T and φ): the
+#: scene is placed before the problem names its fields.
+PLACEMENT_FIELDS = 2
+
 __all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_points"]
 
 
@@ -230,7 +236,7 @@ def _grouped(serial: Scene, comm: MPI.Comm) -> Scene:
         n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
         for n, b in serial.bodies.items()
     }
-    owner, group_of_rank = _place(cells, comm.size)
+    owner, group_of_rank = _place(cells, _work(serial), comm.size)
     group = group_of_rank[comm.rank]
     group_comm = comm.Split(group, comm.rank)
     roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
@@ -241,21 +247,54 @@ def _grouped(serial: Scene, comm: MPI.Comm) -> Scene:
     return Scene(serial.source, comm, bodies, serial.interfaces, owner, group, group_comm, roots)
 
 
-def _place(cells: dict[str, int], ranks: int) -> tuple[dict[str, int], list[int]]:
-    """Body -> group, and rank -> group: groups sized by cells, or bodies packed on ranks."""
-    names = sorted(cells, key=lambda n: -cells[n])
+def _work(scene: Scene) -> dict[str, float] | None:
+    """Each body's factorisation work [flops], estimated from its nodes and contact nodes.
+
+    The fields are not known yet: counted for :data:`PLACEMENT_FIELDS` unknowns per node.
+    None where some body would be factorised whole (no Schur block): the sparse strip
+    corrector then serves its interfaces, and its factorisation over the ranks of those
+    bodies follows their cells.
+    """
+    work = {}
+    for name, body in scene.bodies.items():
+        nodes = [i.master_mesh.topology.index_map(0).size_global
+                 for i in scene.interfaces.values() if name in i.bodies]  # fmt: skip
+        contact = PLACEMENT_FIELDS * sum(nodes)
+        size = PLACEMENT_FIELDS * body.mesh.topology.index_map(0).size_global
+        if not keeps_block(contact, size):
+            return None
+        work[name] = factorisation_work(size, contact, body.mesh.topology.dim)
+    return work
+
+
+def _place(
+    cells: dict[str, int], work: dict[str, float] | None, ranks: int
+) -> tuple[dict[str, int], list[int]]:
+    """Body -> group, and rank -> group.
+
+    With a rank or more per body, groups sized by cells (a body spread over several ranks is
+    factorised whole, a cost that follows its cells). With fewer ranks, bodies packed on
+    ranks, largest first, by their factorisation ``work`` where every body keeps a Schur
+    block, else by cells. Measured, 2 ranks, 12 time steps of the 2D preheat: by cells its
+    three bodies with the largest Schur blocks shared a rank, 11.9 s (one rank: 12.6 s); by
+    work 9.4 s. Where some bodies are whole, the work of their strip corrector is not in the
+    estimate: 8 steps of the preheat's small 3D quarter took 13.1 s packed by the estimate
+    and 11.1 s by cells.
+    """
     if ranks >= len(cells):
+        names = sorted(cells, key=lambda n: -cells[n])
         share = dict.fromkeys(names, 1)
         for _ in range(ranks - len(names)):
             share[max(names, key=lambda n: cells[n] / share[n])] += 1
         order = list(cells)  # groups in scene order, consecutive ranks
         owner = {n: g for g, n in enumerate(order)}
         return owner, [owner[n] for n in order for _ in range(share[n])]
-    load = [0] * ranks
+    weight = cells if work is None else work
+    load = [0.0] * ranks
     owner = {}
-    for name in names:
+    for name in sorted(weight, key=lambda n: -weight[n]):
         owner[name] = int(np.argmin(load))
-        load[owner[name]] += cells[name]
+        load[owner[name]] += weight[name]
     return owner, list(range(ranks))
 
 

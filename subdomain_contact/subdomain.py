@@ -125,7 +125,7 @@ class Subdomains:
     Args:
         corrector: How the masters are corrected. Default: the exact corrector; where a body
             has no Schur block (solved iteratively, spread over several ranks, or thin: see
-            :data:`~subdomain_contact.body.SCHUR_FRACTION`) and more master DOFs than
+            :data:`~subdomain_contact.schur.SCHUR_FRACTION`) and more master DOFs than
             ``dense_limit`` (its exact part would cost one body solve per master DOF), the
             exact corrector on a strip (:class:`~subdomain_contact.correctors.SparseStrip`)
             as the preconditioner of the interface Krylov, which applies that body's ``S^α``

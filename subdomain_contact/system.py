@@ -221,12 +221,25 @@ class System:
         return self._everywhere(local)
 
     def total(self, values: Mapping[str, Vector]) -> dict[str, Vector]:
-        """Sum per-interface vectors of the local bodies over the groups (each counted once)."""
+        """Sum per-interface vectors of the local bodies over the groups (each counted once).
+
+        Every rank passes the same keys and sizes: one ``MPI_Allreduce`` of their
+        concatenation, not one pickled reduction per interface.
+        """
         scene = self.problem.scene
         if scene.shared:
             return {k: np.asarray(v) for k, v in values.items()}
-        weight = 1.0 if scene.group_comm.rank == 0 else 0.0
-        return {k: self.comm.allreduce(weight * np.asarray(v)) for k, v in values.items()}
+        arrays = {k: np.asarray(v, dtype=float) for k, v in values.items()}
+        flat = np.concatenate([a.ravel() for a in arrays.values()]) if arrays else np.zeros(0)
+        if scene.group_comm.rank != 0:
+            flat[:] = 0.0
+        summed = np.empty_like(flat)
+        self.comm.Allreduce(flat, summed, op=MPI.SUM)
+        ends = np.cumsum([0] + [a.size for a in arrays.values()])
+        return {
+            k: summed[ends[i] : ends[i + 1]].reshape(a.shape)
+            for i, (k, a) in enumerate(arrays.items())
+        }
 
     def bodies_of(self, k: str) -> list[Body]:
         """The local bodies that touch interface ``k``."""

@@ -7,7 +7,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
-from subdomain_contact import body as body_module
+from subdomain_contact import schur as schur_module
 from subdomain_contact.merged import merged_matrix, same_pattern
 from subdomain_contact.solvers import destroy
 from verification.cases import (
@@ -297,12 +297,12 @@ def test_coupled_rank_groups_equal_serial(comm):
 def test_a_thin_body_is_factorised_whole(comm, monkeypatch):
     """Above SCHUR_SMALL contact DOFs, a body whose contact DOFs are more than SCHUR_FRACTION
     of its DOFs gets no dense Schur block (the cast iron, a thin layer between contacts)."""
-    monkeypatch.setattr(body_module, "SCHUR_SMALL", 0)  # the test mesh's bodies are small
+    monkeypatch.setattr(schur_module, "SCHUR_SMALL", 0)  # the test mesh's bodies are small
     scene = cathode_slot_scene(0.06, 0.03, comm=comm)
     with sc.System(cathode_slot(scene)) as system:
         shares = {n: len(b.kept) / b.size for n, b in system.bodies.items()}
         for name, body in system.bodies.items():
-            assert body.schur == (shares[name] <= body_module.SCHUR_FRACTION), shares
+            assert body.schur == (shares[name] <= schur_module.SCHUR_FRACTION), shares
         if "cast_iron" in shares:
             assert shares["cast_iron"] > 0.5 and not system.bodies["cast_iron"].schur
         if "block" in shares:

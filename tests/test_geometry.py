@@ -183,3 +183,35 @@ def test_a_parameter_does_not_leak_into_the_next_load(comm):
 
     assert right_end({"length": 0.25}) == pytest.approx(0.5)
     assert right_end({}) == pytest.approx(2.0)
+
+
+def test_bodies_with_large_schur_blocks_are_spread_over_ranks():
+    """Fewer ranks than bodies: bodies are packed on ranks by their factorisation work.
+
+    The 2D preheat slice (its default mesh): the cathode block, the coke bed and the cast
+    iron keep Schur blocks of 624–702 contact DOFs, whose dense algebra (4.7 n³) outweighs
+    every sparse factorisation; packed by cells they shared one of 2 ranks with the smallest
+    bodies on the other. By work, no rank holds all three, and the two loads are within the
+    largest body's work of each other (greedy packing, largest first).
+    """
+    from subdomain_contact.scene import _place, _work
+
+    interfaces = ["anode_coke", "coke_block", "slot_top", "bar_top"]
+    interfaces += ["block_paste", "iron_paste", "bar_paste"]
+    scene = sc.load_scene(
+        GEO / "preheat_slice.geo",
+        bodies=["anode", "coke", "block", "cast_iron", "bar", "paste"],
+        interfaces=interfaces,
+        parameters={"size": 0.04, "fine": 0.01, "coke": 0.02},
+        comm=MPI.COMM_SELF,
+    )
+    cells = {n: b.mesh.topology.index_map(2).size_global for n, b in scene.bodies.items()}
+    work = _work(scene)
+    heavy = {"block", "coke", "cast_iron"}
+    assert heavy == set(sorted(work, key=work.get)[-3:])
+    by_cells, _ = _place(cells, None, 2)
+    assert len({by_cells[n] for n in heavy}) == 1  # the imbalance the work estimate removes
+    owner, ranks = _place(cells, work, 2)
+    assert ranks == [0, 1] and len({owner[n] for n in heavy}) == 2
+    load = [sum(w for n, w in work.items() if owner[n] == r) for r in (0, 1)]
+    assert abs(load[0] - load[1]) <= max(work.values())
