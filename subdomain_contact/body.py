@@ -49,7 +49,7 @@ from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave
 from subdomain_contact.modes import modes
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
-from subdomain_contact.schur import CondensedFactor, keeps_block
+from subdomain_contact.schur import CondensedFactor, condensation
 from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp, ordered, ordering
 
 __all__ = ["ITERATIVE", "SPLIT", "SPLIT_FIELD", "Body"]
@@ -94,6 +94,9 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
 #: field's residual is above the tolerance relative to its own scale.
 FIELD_REFINEMENTS = 3
 
+#: Memory of the right-hand sides that a body's multi-column solve holds at once [bytes].
+COLUMN_BYTES = 64 * 2**20
+
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
 MasterValues = dict[str, npt.NDArray[np.float64]]
@@ -113,9 +116,10 @@ class Body:
         body: The scene's body (held by this rank's group).
         layers: Master layer of each interface the body touches, in scene order.
         prefix: PETSc options prefix of the body's factorisation (``<prefix>mat_mumps_*``).
-        schur: Factorise with the contact DOFs left as a dense Schur block (a body on one
-            rank only, with few contact DOFs: :func:`~subdomain_contact.schur.keeps_block`);
-            otherwise the whole body matrix is factorised.
+        schur: Condense the body on its contact DOFs where it is on one rank: a dense
+            Schur block, or for a thin body its ``S^α`` by multi-column solves
+            (:func:`~subdomain_contact.schur.condensation`); otherwise the whole body matrix
+            is factorised and ``S^α`` applied by body solves.
         iterative: Solve the body by Krylov + AMG (:data:`ITERATIVE`, options under
             ``prefix``) instead of a factorisation.
 
@@ -150,8 +154,11 @@ class Body:
         self._compile()
         self.iterative = iterative
         contact = len(self.kept)
-        few = keeps_block(contact, self.size)
-        self.schur = schur and not iterative and self.comm.size == 1 and 0 < contact and few
+        alone = schur and not iterative and self.comm.size == 1 and 0 < contact
+        how = condensation(contact, self.size) if alone else ""
+        self.schur = how == "block"
+        #: A thin body: factorised whole, its ``S^α`` formed densely by multi-column solves.
+        self.columns = how == "columns"
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None
         self._near_null: list[PETSc.Object] = []
@@ -770,7 +777,33 @@ class Body:
         return d * self.factor.solve_block(d * rhs_s)
 
     def _solve_columns(self, rhs_s: Matrix) -> tuple[Matrix, Matrix]:
-        """Body solves for right-hand sides on the contact DOFs: ``y_s`` and ``(A_bulk y)_s``."""
+        """Body solves for right-hand sides on the contact DOFs: ``y_s`` and ``(A_bulk y)_s``.
+
+        A body factorised on one rank solves many columns at once (``MatMatSolve``, in
+        blocks of :data:`COLUMN_BYTES`); otherwise one solve per column.
+        """
+        if self.iterative or self.comm.size > 1 or rhs_s.shape[1] == 1:
+            return self._solve_each_column(rhs_s)
+        factor = self.ksp.getPC().getFactorMatrix()
+        y_s, Ay_s = np.empty_like(rhs_s), np.empty_like(rhs_s)
+        width = max(1, COLUMN_BYTES // (8 * self.size))
+        for first in range(0, rhs_s.shape[1], width):
+            block = slice(first, min(first + width, rhs_s.shape[1]))
+            rhs = np.zeros((self.size, block.stop - block.start), order="F")
+            rhs[self.kept_local] = rhs_s[:, block]
+            B = PETSc.Mat().createDense(rhs.shape, array=rhs, comm=PETSc.COMM_SELF)
+            X = PETSc.Mat().createDense(rhs.shape, comm=PETSc.COMM_SELF)
+            X.setUp()
+            factor.matSolve(B, X)
+            AX = self.A_bulk.matMult(X)
+            y_s[:, block] = X.getDenseArray(readonly=True)[self.kept_local]
+            Ay_s[:, block] = AX.getDenseArray(readonly=True)[self.kept_local]
+            for mat in (B, X, AX):
+                mat.destroy()
+        return y_s, Ay_s
+
+    def _solve_each_column(self, rhs_s: Matrix) -> tuple[Matrix, Matrix]:
+        """:meth:`_solve_columns` by one body solve per column (iterative or spread bodies)."""
         y_s, Ay_s = np.zeros_like(rhs_s), np.zeros_like(rhs_s)
         rhs = np.zeros(self.size)
         x, Ay = self._vectors[0], self._vectors[2]

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from subdomain_contact.schur import factorisation_work, keeps_block
+from subdomain_contact.schur import factorisation_work
 
 #: Unknowns per node that the placement of bodies on ranks counts with (T and φ): the
 #: scene is placed before the problem names its fields.
@@ -251,9 +251,8 @@ def _work(scene: Scene) -> dict[str, float] | None:
     """Each body's factorisation work [flops], estimated from its nodes and contact nodes.
 
     The fields are not known yet: counted for :data:`PLACEMENT_FIELDS` unknowns per node.
-    None where some body would be factorised whole (no Schur block): the sparse strip
-    corrector then serves its interfaces, and its factorisation over the ranks of those
-    bodies follows their cells.
+    None where some body would not be condensed: the sparse strip corrector then serves its
+    interfaces, and its factorisation over the ranks of those bodies follows their cells.
     """
     work = {}
     for name, body in scene.bodies.items():
@@ -261,9 +260,10 @@ def _work(scene: Scene) -> dict[str, float] | None:
                  for i in scene.interfaces.values() if name in i.bodies]  # fmt: skip
         contact = PLACEMENT_FIELDS * sum(nodes)
         size = PLACEMENT_FIELDS * body.mesh.topology.index_map(0).size_global
-        if not keeps_block(contact, size):
+        estimate = factorisation_work(size, contact, body.mesh.topology.dim)
+        if estimate is None:
             return None
-        work[name] = factorisation_work(size, contact, body.mesh.topology.dim)
+        work[name] = estimate
     return work
 
 
@@ -274,12 +274,12 @@ def _place(
 
     With a rank or more per body, groups sized by cells (a body spread over several ranks is
     factorised whole, a cost that follows its cells). With fewer ranks, bodies packed on
-    ranks, largest first, by their factorisation ``work`` where every body keeps a Schur
-    block, else by cells. Measured, 2 ranks, 12 time steps of the 2D preheat: by cells its
-    three bodies with the largest Schur blocks shared a rank, 11.9 s (one rank: 12.6 s); by
-    work 9.4 s. Where some bodies are whole, the work of their strip corrector is not in the
-    estimate: 8 steps of the preheat's small 3D quarter took 13.1 s packed by the estimate
-    and 11.1 s by cells.
+    ranks, largest first, by their factorisation ``work`` where every body is condensed on
+    its contact DOFs, else by cells. Measured, 2 ranks, 12 time steps of the 2D preheat: by
+    cells its three bodies with the largest Schur blocks shared a rank, 11.9 s (one rank:
+    12.6 s); by work 9.4 s. Where some bodies are not condensed, the work of their strip
+    corrector is not in the estimate: 8 steps of the preheat's small 3D quarter took 13.1 s
+    packed by the estimate and 11.1 s by cells.
     """
     if ranks >= len(cells):
         names = sorted(cells, key=lambda n: -cells[n])

@@ -124,8 +124,8 @@ class Subdomains:
 
     Args:
         corrector: How the masters are corrected. Default: the exact corrector; where a body
-            has no Schur block (solved iteratively, spread over several ranks, or thin: see
-            :data:`~subdomain_contact.schur.SCHUR_FRACTION`) and more master DOFs than
+            is not condensed (solved iteratively, spread over several ranks, or with many
+            contact DOFs: :func:`~subdomain_contact.schur.condensation`) and more master DOFs than
             ``dense_limit`` (its exact part would cost one body solve per master DOF), the
             exact corrector on a strip (:class:`~subdomain_contact.correctors.SparseStrip`)
             as the preconditioner of the interface Krylov, which applies that body's ``S^α``
@@ -146,9 +146,9 @@ class Subdomains:
             DOFs, 18 Newton steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D
             blocks at 31k DOFs: 25.6 s and 29.2 s), so there it is rebuilt every time.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
-            instead of a dense matrix. By default a body on one rank forms it from its Schur
-            block (dense algebra), and a body spread over several ranks or solved
-            iteratively up to 32 master DOFs (forming it costs one body solve per master
+            instead of a dense matrix. By default a body condensed on its contact DOFs
+            forms it (from its Schur block, or a thin body by multi-column solves), and
+            any other up to 32 master DOFs (forming it costs one body solve per master
             DOF).
         max_rounds: Rounds of the fixed point, or Krylov iterations per refinement step.
         max_refinements: Krylov refinement steps after the first.
@@ -211,7 +211,8 @@ class Subdomains:
             body.factorise()
         scene = system.problem.scene
         costly = system.comm.allreduce(
-            any(not (b.schur or self._dense(b)) for b in system.bodies.values()), op=MPI.LOR
+            any(not (b.schur or b.columns or self._dense(b)) for b in system.bodies.values()),
+            op=MPI.LOR,
         )
         if self.given is None:
             self.corrector = SparseStrip() if costly else Exact()
@@ -278,7 +279,7 @@ class Subdomains:
     def _dense(self, body) -> bool:
         masters = sum(body.master_sizes())
         if self.dense_limit is None:
-            return body.schur or masters <= 32
+            return body.schur or body.columns or masters <= 32
         return masters <= self.dense_limit
 
     def _part(self, k: str, body) -> Matrix:

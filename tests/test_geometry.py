@@ -185,12 +185,13 @@ def test_a_parameter_does_not_leak_into_the_next_load(comm):
     assert right_end({}) == pytest.approx(2.0)
 
 
-def test_bodies_with_large_schur_blocks_are_spread_over_ranks():
+def test_bodies_with_large_condensations_are_spread_over_ranks():
     """Fewer ranks than bodies: bodies are packed on ranks by their factorisation work.
 
-    The 2D preheat slice (its default mesh): the cathode block, the coke bed and the cast
-    iron keep Schur blocks of 624–702 contact DOFs, whose dense algebra (4.7 n³) outweighs
-    every sparse factorisation; packed by cells they shared one of 2 ranks with the smallest
+    The 2D preheat slice (its default mesh): the cathode block, condensed on a Schur block of
+    694 contact DOFs, and the thin coke bed and cast iron (624 and 702, condensed by
+    multi-column solves) have condensations (4.7 n³, 2.35 n³ flops) that outweigh every
+    sparse factorisation; packed by cells they shared one of 2 ranks with the smallest
     bodies on the other. By work, no rank holds all three, and the two loads are within the
     largest body's work of each other (greedy packing, largest first).
     """
