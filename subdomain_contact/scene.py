@@ -276,7 +276,7 @@ def _place(
     factorised whole, a cost that follows its cells). With fewer ranks, bodies packed on
     ranks, largest first, by their factorisation ``work`` where every body is condensed on
     its contact DOFs, else by cells. Measured, 2 ranks, 12 time steps of the 2D preheat: by
-    cells its three bodies with the largest Schur blocks shared a rank, 11.9 s (one rank:
+    cells its three bodies with the largest condensations shared a rank, 11.9 s (one rank:
     12.6 s); by work 9.4 s. Where some bodies are not condensed, the work of their strip
     corrector is not in the estimate: 8 steps of the preheat's small 3D quarter took 13.1 s
     packed by the estimate and 11.1 s by cells.

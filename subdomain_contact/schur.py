@@ -45,13 +45,12 @@ SCHUR_FRACTION = 0.25
 #: ``S^α`` hold about 3 n² doubles, 1.5 GB at n = 8000.
 SCHUR_LIMIT = 8000
 
-
 #: Share of its DOFs above which a body with at most :data:`SCHUR_SMALL` contact DOFs is
 #: thin: factorised whole, its ``S^α`` formed by solves of the sparse factorisation for
 #: every master column at once. Its Schur block would be most of the body, and the dense
 #: algebra on it (4.7 n³) costs more than the sparse solves: on the 2D preheat's coke bed
-#: (624 of 942 DOFs) and cast iron (702 of 1,052), 12 time steps, factorisation and
-#: ``S^α`` 1.0 and 1.3 s instead of 1.8 and 1.9 s.
+#: (624 of 942 DOFs) and cast iron (702 of 1,052), 12 time steps, CPU time of the
+#: factorisations and ``S^α`` 1.08 and 1.46 s instead of 1.70 and 1.74 s.
 THIN_SHARE = 0.5
 
 
@@ -74,7 +73,7 @@ def factorisation_work(size: int, contact: int, dim: int) -> float | None:
     3D (MUMPS's count, RINFOG(3), for the 5- and 7-point Laplacians of 3.6k–27k unknowns);
     with a Schur block (:func:`condensation`) the dense algebra on it at every update,
     4.7 n³: its LU (2/3 n³), its solve for as many columns (2 n³) and the reaction ``Σ y``
-    (2 n³); a thin body's multi-column solves, counted as half that (measured at 0.55–0.7
+    (2 n³); a thin body's multi-column solves, counted as half that (measured at 0.64–0.84
     of its Schur block's time). In 2D the block is the larger part: the cathode block of the
     2D preheat, 3.4k nodes of which 347 on contacts, 6.1e6 sparse against 2.0e8 dense. None
     for a body that is not condensed: the work of its iterative interface (the sparse strip)
