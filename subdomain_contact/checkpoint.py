@@ -12,6 +12,7 @@ their coordinates, so a run may resume on another number of ranks or another pla
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -23,12 +24,25 @@ from subdomain_contact.body import Body
 from subdomain_contact.scene import match_points
 from subdomain_contact.system import System
 
-__all__ = ["latest", "load", "save"]
+__all__ = ["latest", "load", "save", "write_whole"]
 
 Vector = npt.NDArray[np.float64]
 
 #: Checkpoints kept (the latest ones): one more than the latest, should a disk fill up.
 KEEP = 2
+
+
+def write_whole(path: str | Path, text: str) -> None:
+    """Replace a file's text at once: a run killed while writing leaves the old file whole.
+
+    The text goes to ``<name>.part`` first, which :func:`os.replace` then renames over the
+    file (atomic on POSIX file systems); :meth:`Path.write_text` truncates the file first, and
+    a SIGKILL between the truncation and the write left it empty.
+    """
+    path = Path(path)
+    part = path.with_name(path.name + ".part")
+    part.write_text(text)
+    os.replace(part, path)
 
 
 def save(
@@ -86,7 +100,7 @@ def save(
         (partial / "clock.json").write_text(json.dumps(clock))
         shutil.rmtree(final, ignore_errors=True)
         partial.rename(final)
-        (directory / "latest").write_text(final.name)
+        write_whole(directory / "latest", final.name)
         for older in sorted(directory.glob("step_*"))[:-KEEP]:
             shutil.rmtree(older)
     comm.barrier()

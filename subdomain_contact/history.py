@@ -17,6 +17,7 @@ draws each probe against time.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import shutil
 import signal
@@ -220,12 +221,13 @@ class History:
             return
         self.directory.mkdir(parents=True, exist_ok=True)
         columns = list(self.rows[0])
-        with open(self.directory / "history.csv", "w", newline="") as out:
-            writer = csv.DictWriter(out, columns)
-            writer.writeheader()
-            writer.writerows(self.rows)
+        table = io.StringIO(newline="")
+        writer = csv.DictWriter(table, columns)
+        writer.writeheader()
+        writer.writerows(self.rows)
+        checkpoint.write_whole(self.directory / "history.csv", table.getvalue())
         document = {"columns": columns, "rows": self.rows}
-        (self.directory / "history.json").write_text(json.dumps(document, indent=1))
+        checkpoint.write_whole(self.directory / "history.json", json.dumps(document, indent=1))
 
     def plot(self, png: str | Path) -> Path:
         """Each probe against time, one panel per probe (rank 0 draws)."""

@@ -144,3 +144,26 @@ def test_sigkill_resumes_from_the_last_checkpoint_on_another_rank_count(uninterr
     for name, (keys, state) in whole.items():
         assert np.array_equal(keys, resumed[name][0])
         assert np.max(np.abs(state - resumed[name][1])) <= 1e-7 * np.max(np.abs(state))
+
+
+def test_a_file_rewritten_when_the_run_is_killed_keeps_its_old_text(tmp_path, monkeypatch):
+    """The history and the pointer to the latest checkpoint are rewritten at every step: a kill
+    between writing the new text and renaming it into place (here: the rename raises) leaves
+    the previous text whole. Truncating the file first left it empty, and the restart failed
+    to read it (seen once in CI, a SIGKILL landing inside the write)."""
+    from subdomain_contact.checkpoint import write_whole
+
+    target = tmp_path / "history.json"
+    write_whole(target, '{"rows": [1]}')
+
+    def killed(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "replace", killed)
+    with pytest.raises(KeyboardInterrupt):
+        write_whole(target, '{"rows": [1, 2]}')
+    assert target.read_text() == '{"rows": [1]}'
+    monkeypatch.undo()
+    write_whole(target, '{"rows": [1, 2]}')
+    assert target.read_text() == '{"rows": [1, 2]}'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["history.json"]
