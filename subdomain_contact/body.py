@@ -159,6 +159,8 @@ class Body:
         self.schur = how == "block"
         #: A thin body: factorised whole, its ``S^α`` formed densely by multi-column solves.
         self.columns = how == "columns"
+        #: Whether ``S^α`` is held dense, from a Schur block or from multi-column solves.
+        self.condensed = self.schur or self.columns
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None
         self._near_null: list[PETSc.Object] = []

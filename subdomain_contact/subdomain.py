@@ -211,7 +211,7 @@ class Subdomains:
             body.factorise()
         scene = system.problem.scene
         costly = system.comm.allreduce(
-            any(not (b.schur or b.columns or self._dense(b)) for b in system.bodies.values()),
+            any(not (b.condensed or self._dense(b)) for b in system.bodies.values()),
             op=MPI.LOR,
         )
         if self.given is None:
@@ -279,7 +279,7 @@ class Subdomains:
     def _dense(self, body) -> bool:
         masters = sum(body.master_sizes())
         if self.dense_limit is None:
-            return body.schur or body.columns or masters <= 32
+            return body.condensed or masters <= 32
         return masters <= self.dense_limit
 
     def _part(self, k: str, body) -> Matrix:
