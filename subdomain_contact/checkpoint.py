@@ -1,12 +1,13 @@
 """Checkpoints of a transient run: the state, the previous times' states and the clock.
 
-Written as NumPy ``.npz`` files, one per body and one for the master layers and the stepper,
-in a folder per checkpoint; a checkpoint becomes the latest only once all its files are
-written (the folder is renamed into place), and the pointer to it, like the run's history,
-is rewritten whole (:func:`write_whole`), so a run killed while writing keeps the one before. Why NumPy rather than adios4dolfinx: ADIOS2 is not in this project's stack, and
-the state is all a restart needs (the mesh comes again from the ``.geo`` file). Each body's
-values are keyed by the mesh's *input* node numbers and by component, and the master values by
-their coordinates, so a run may resume on another number of ranks or another placement.
+Written as NumPy ``.npz`` files, one per body and one for the master layers and the stepper, in
+a folder per checkpoint; a checkpoint becomes the latest only once all its files are written
+(the folder is renamed into place), and the pointer to it, like the run's history, is rewritten
+whole (:func:`write_whole`), so a run killed while writing keeps the one before. Why NumPy
+rather than adios4dolfinx: ADIOS2 is not in this project's stack, and the state is all a
+restart needs (the mesh comes again from the ``.geo`` file). Each body's values are keyed by
+the mesh's *input* node numbers and by component, and the master values by their coordinates,
+so a run may resume on another number of ranks or another placement.
 """
 
 from __future__ import annotations
