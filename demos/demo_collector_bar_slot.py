@@ -183,7 +183,7 @@ def read(system: sc.System, result: sc.Result) -> dict:
             "gap [m]": stats(f["gap"], area),
             "resistance [ohm m2]": stats(resistance, area),
             "current density [A/m2]": stats(f["current density"], area),
-            "open area share": float(area[f["pressure"] <= 0].sum() / area.sum()),
+            "open area share": sc.open_share(f["gap"], area),
         }
     return {
         "voltage_drop_mV": 1e3 * sc.voltage_drop(system, "top", "bar_end"),

@@ -44,6 +44,7 @@ __all__ = [
     "enthalpy",
     "force",
     "heat",
+    "open_share",
     "summary",
     "value_at",
     "voltage_drop",
@@ -61,6 +62,23 @@ CONTACT_UNITS = {
     "pressure": "Pa",
     "gap": "m",
 }
+
+
+#: A contact node is open where its gap exceeds this share of the face's largest |gap| (open
+#: or penetrated). Below it the gap's sign is the round-off of the displacements: on the
+#: collector bar slot at 204k DOFs the two Newton routes, equal to 1e-15, classed 0.27 % of the
+#: slot sides' area differently by the sign of a pressure at round-off alone.
+OPEN_GAP = 1e-9
+
+
+def open_share(gap: Vector, area: Vector) -> float:
+    """The share of a contact's area that is open (nodal ``gap`` [m], ``area`` [m²]).
+
+    Open where the gap is above :data:`OPEN_GAP` times the face's largest |gap|: a node at
+    closure to round-off counts as closed on every route and rank count.
+    """
+    scale = float(np.max(np.abs(gap), initial=0.0))
+    return float(area[gap > OPEN_GAP * scale].sum() / area.sum())
 
 
 def current(system: System, group: str) -> float:
@@ -292,7 +310,7 @@ def summary(system: System) -> dict:
             row["force"] = _force(reading, k).tolist()
             row["mean pressure"] = float(np.sum(values["pressure"] * area) / area.sum())
             row["max pressure"] = float(values["pressure"].max())
-            row["open share"] = float(area[values["gap"] > 0].sum() / area.sum())
+            row["open share"] = open_share(values["gap"], area)
     return {"balance": _balance(reading), "groups": groups, "contacts": contacts}
 
 
