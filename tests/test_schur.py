@@ -107,6 +107,39 @@ def test_interface_operators_from_schur_equal_whole_body_solves(scene, problem):
             assert np.abs(value - reference).max() <= 1e-10 * np.abs(reference).max(), key
 
 
+@pytest.mark.parametrize(
+    ("scene", "problem"),
+    [
+        (lambda: two_plates_scene(6, 5, quads=False, placement="groups"), _fixed_slaves),
+        (lambda: bars_scene(4, 2, placement="groups"), squeezed_joule_bars),
+    ],
+    ids=["fixed slaves", "coupled T, φ, u"],
+)
+def test_the_whole_matrix_is_the_whole_form_assembled(scene, problem):
+    """``A = A_bulk + Σ_k L_k``, built from the bulk matrix and the links' block on the
+    contact rows, equals the Jacobian of the bulk and link forms assembled at once, with the
+    Dirichlet conditions; for the coupled bars away from the cold state (laws of p and T,
+    unsymmetric, mixed fields)."""
+    problem = problem(scene())
+    system = make_system(problem)
+    system.reset({"temperature": 300.0} if len(problem.fields) > 1 else None)
+    if len(problem.fields) > 1:
+        sc.solve(system, max_it=3, rtol=0.5)  # a state away from the cold one
+    system.assemble_jacobian()
+    for body in system.bodies.values():
+        forms = body.forms
+        whole = forms.bulk + sum(body._linearised[k] for k in body.layers)
+        a = dolfinx.fem.form(ufl.derivative(whole, forms.U, ufl.TrialFunction(forms.W)))
+        expected = dolfinx.fem.petsc.assemble_matrix(a, bcs=forms.bcs)
+        expected.assemble()
+        built = body.whole_matrix()
+        scale = expected.norm(PETSc.NormType.INFINITY)
+        expected.axpy(-1.0, built, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        # the same entries summed in another order: a few eps of the largest row sum
+        assert expected.norm(PETSc.NormType.INFINITY) <= 1e-13 * scale, body.name
+        expected.destroy()
+
+
 def test_a_thin_body_condensed_by_columns_equals_its_schur_block(monkeypatch):
     """The cast iron of the cathode slot (T, φ, u; most of its DOFs on contacts) is thin: its
     S^α from one multi-column solve of its whole factorisation equals the one from its
