@@ -462,21 +462,12 @@ class Body:
     ) -> tuple[Vector, dict[str, Vector]]:
         """The body's rows of ``J [x; y_m]`` (owned) and its shares ``C_k x + D_k P_k y_k``.
 
-        With the whole matrix where it is assembled for this state (the monolithic
-        reference), else with the bulk matrix and the contact blocks.
+        ``A x`` by :meth:`_apply_A`, the masters' coupling added on the contact rows.
         """
         columns = {k: v[:, None] for k, v in masters.items()}
-        v, out = self._vectors[0], self._vectors[1]
-        v.array[:] = x
         x_s = self._gather_kept(x[self.kept_local])[:, None]
-        kept = self.coupling(columns)[:, 0]
-        if self._whole_step == self._step:
-            self._A.mult(v, out)
-        else:
-            self.bulk_matrix().mult(v, out)
-            kept = kept + (self.L_bc @ x_s)[:, 0]
-        rows = out.array.copy()
-        rows[self.kept_local] += kept[self.kept_slice]
+        rows = self._apply_A(x)
+        rows[self.kept_local] += self.coupling(columns)[self.kept_slice, 0]
         shares = {}
         for k, rows_k in self._rows.items():  # the link's own blocks on its slave rows
             blocks = self.blocks[k]
@@ -628,10 +619,17 @@ class Body:
         return self.scale * x.array
 
     def _apply_A(self, y: Vector) -> Vector:
-        """``A y = A_bulk y + Σ_k L_k y`` (conditions included) on owned DOFs."""
+        """``A y = A_bulk y + Σ_k L_k y`` (conditions included) on owned DOFs.
+
+        By the whole matrix where it is built for this state, else by the bulk matrix and
+        the links' block.
+        """
         x, Ay = self._vectors[0], self._vectors[2]
         x.array[:] = y
-        self.A_bulk.mult(x, Ay)
+        if self._A is not None and self._whole_step == self._step:
+            self._A.mult(x, Ay)
+            return Ay.array.copy()
+        self.bulk_matrix().mult(x, Ay)
         out = Ay.array.copy()
         y_s = self._gather_kept(y[self.kept_local])
         out[self.kept_local] += (self.L_bc @ y_s)[self.kept_slice]
