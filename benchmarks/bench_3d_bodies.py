@@ -13,7 +13,7 @@ above the one before it (the largest over the ranks; Linux: the peak is reset th
 ``/proc/self/clear_refs``), and the largest difference between the two solutions over T, φ
 and the three components of u, each relative to the field's range. ``--bodies iterative``
 solves the subdomain route's bodies by GMRES + GAMG per field; ``--no-monolithic`` leaves the
-monolithic Newton out where it does not fit.
+monolithic Newton out where it does not fit; ``--history`` prints each Newton's iterates.
 
 Run: ``./dev python benchmarks/bench_3d_bodies.py`` (``--sizes 0.05 0.025``), and under
 ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``: the monolithic Newton spreads the blocks over
@@ -41,6 +41,7 @@ parser.add_argument(
     help="the subdomain route's body solves (sc.System's solver): auto is iterative for a "
     "3D body above system.ITERATIVE_ABOVE DOFs",
 )  # fmt: skip
+parser.add_argument("--history", action="store_true", help="print each Newton's history")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 placement = "groups" if comm.size > 1 else "shared"
@@ -99,3 +100,7 @@ for size in args.sizes:
             f"| {'—' if mono is None else f'{difference:.1e}'} |",
             flush=True,
         )
+        if args.history:
+            print(f"subdomain Newton:\n{sub.table()}", flush=True)
+            if mono is not None:
+                print(f"monolithic Newton:\n{mono.table()}", flush=True)

@@ -577,9 +577,14 @@ class Subdomains:
             for k, s in self.slices.items():
                 increments[k] = increments[k] + delta[s]
         result.applications = self._applications
+        reached = (
+            f" (reached: {_describe(Tolerance(atol=system.master_field_norms(residual)))})"
+            if tolerance.atol is not None
+            else ""
+        )
         raise SubdomainConvergenceError(
             f"interface Krylov ({self.corrector.name} preconditioner): the true residual "
-            f"{result.history[-1]:.2e} is above {_describe(tolerance)} after "
+            f"{result.history[-1]:.2e} is above {_describe(tolerance)}{reached} after "
             f"{self.max_refinements} refinements",
             result,
         )
