@@ -169,9 +169,15 @@ class SparseStrip:
     are coupled through the bodies, not corrected one by one. Applied by one solve of that
     sparse matrix (MUMPS, options under ``-<prefix>``): nothing dense is stored, so it serves
     interfaces of any size and bodies whose contact DOFs are most of their DOFs.
+
+    The strip of an iterative body stops growing before it covers more than ``share`` of the
+    body's DOFs (at least one layer): it is factorised, where the body is solved iteratively
+    so as not to be. Ten layers covered most of each block of the row of four 3D blocks
+    (75k DOFs: peak memory 1.31 GiB against 0.92 GiB with three layers, 143 s against 137 s).
     """
 
     layers: int = 10
+    share: float = 0.25
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
 
@@ -179,9 +185,11 @@ class SparseStrip:
         """Its operator for the system's assembled blocks (``operator``: the last one, kept)."""
         if self.layers < 1:
             raise ValueError(f"sparse strip corrector: layers = {self.layers}")
+        if not 0.0 < self.share <= 1.0:
+            raise ValueError(f"sparse strip corrector: share = {self.share}, not in (0, 1]")
         if operator is None:
             operator = StripSolve(self.prefix)
-        operator.update(system, self.layers)
+        operator.update(system, self.layers, self.share)
         return operator
 
 
@@ -202,15 +210,19 @@ class StripSolve:
         #: whole ``S^α``, kernel modes included.
         self.whole: frozenset[str] = frozenset()
 
-    def update(self, system: System, layers: int) -> None:
-        """Restrict the merged matrix to the strips and factorise (its analysis kept)."""
+    def update(self, system: System, layers: int, share: float = 1.0) -> None:
+        """Restrict the merged matrix to the strips and factorise (its analysis kept).
+
+        ``share``: the largest part of an iterative body's DOFs in its strip.
+        """
         self.comm = system.comm
         if self.rows is None:
             layout = Layout(system)
             picked, whole = [], {}
             for name, body in system.bodies.items():
                 seeds = np.unique(np.concatenate([s.local_dofs for s in body.slaves.values()]))
-                strip = dofs_within_layers(body.forms.W, seeds.astype(np.int32), layers)
+                most = share * body.comm.allreduce(body.size) if body.iterative else None
+                strip = dofs_within_layers(body.forms.W, seeds.astype(np.int32), layers, most)
                 picked.append(layout.body(name, body.start + strip))
                 whole[name] = body.comm.allreduce(strip.size == body.size, op=MPI.LAND)
             self.whole = frozenset(n for n, w in system.everywhere(whole).items() if w)
@@ -259,22 +271,34 @@ class StripSolve:
 
 
 def dofs_within_layers(
-    W: dolfinx.fem.FunctionSpace, seeds: npt.NDArray[np.int32], layers: int
+    W: dolfinx.fem.FunctionSpace,
+    seeds: npt.NDArray[np.int32],
+    layers: int,
+    most: float | None = None,
 ) -> npt.NDArray[np.int32]:
     """Owned DOFs of ``W`` within ``layers`` element layers of the DOFs ``seeds`` (included).
 
     A layer is every cell that has a marked DOF; its DOFs are marked for the next layer.
-    Parallel-safe: marks cross process boundaries through the index map.
+    With ``most``, no layer is added beyond the first that would make the DOFs more than
+    ``most`` (over every rank). Parallel-safe: marks cross process boundaries through the
+    index map.
     """
     bs = W.dofmap.index_map_bs
+    owned = W.dofmap.index_map.size_local
     marker = dolfinx.la.vector(W.dofmap.index_map, dtype=np.int32)
     marker.array[np.asarray(seeds) // bs] = 1
     marker.scatter_forward()
     cells = W.dofmap.list
-    for _ in range(layers):
+    for layer in range(layers):
+        before = marker.array.copy()
         hit = cells[marker.array[cells].max(axis=1) > 0]
         marker.array[hit.ravel()] = 1
         marker.scatter_reverse(dolfinx.la.InsertMode.add)
         marker.scatter_forward()
-    blocks = np.flatnonzero(marker.array[: W.dofmap.index_map.size_local])
+        if most is not None and layer > 0:
+            count = W.mesh.comm.allreduce(bs * np.count_nonzero(marker.array[:owned]))
+            if count > most:
+                marker.array[:] = before
+                break
+    blocks = np.flatnonzero(marker.array[:owned])
     return (bs * blocks[:, None] + np.arange(bs)).ravel().astype(np.int32)

@@ -179,6 +179,35 @@ def test_sparse_strip_is_the_dense_strip_corrector_on_one_interface(comm, h):
             assert np.linalg.norm(a - b) <= 10 * EPS * loss * condition * np.linalg.norm(a)
 
 
+def test_a_strip_limited_to_a_share_of_the_body_stops_at_a_whole_layer(comm):
+    """``most`` keeps the most layers (at least one, at most ``layers``) whose DOFs are not
+    more than ``most``: the unlimited strips of 1, 2, … layers are the truth (a 3D block, P1
+    vectors, seeded on its contact face; serial and on 2 ranks, counted over the ranks)."""
+    import basix.ufl
+    import dolfinx
+
+    mesh = blocks3d_scene(0.05, comm=comm, placement="shared").bodies["block_A"].mesh
+    W = dolfinx.fem.functionspace(mesh, basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,)))
+    x_max = comm.allreduce(mesh.geometry.x[:, 0].max(), op=MPI.MAX)
+    face = dolfinx.fem.locate_dofs_geometrical(W, lambda x: np.isclose(x[0], x_max))
+    seeds = (3 * face[:, None] + np.arange(3)).ravel().astype(np.int32)
+    seeds = seeds[seeds < 3 * W.dofmap.index_map.size_local]
+    total = 3 * W.dofmap.index_map.size_global
+
+    def count(dofs):
+        return comm.allreduce(dofs.size)
+
+    unlimited = [count(dofs_within_layers(W, seeds, n)) for n in range(1, 9)]
+    assert np.all(np.diff(unlimited) > 0)  # it grows
+    assert unlimited[-1] < total  # eight layers do not reach the far face
+    for share in (1e-3, 0.2, 0.5, 1.0):
+        most = share * total
+        kept = max([n for n, c in enumerate(unlimited, 1) if c <= most], default=1)
+        limited = dofs_within_layers(W, seeds, 8, most)
+        assert count(limited) == unlimited[kept - 1], (share, kept)
+        assert np.array_equal(limited, dofs_within_layers(W, seeds, kept))
+
+
 @pytest.mark.parametrize("h", [1.0, 1e4, 1e8])
 def test_a_strip_that_holds_every_body_whole_is_the_exact_corrector(chain, h):
     """Bodies two cells across, 10 element layers: every body lies whole in its strip, the
