@@ -466,7 +466,7 @@ class Body:
         """
         columns = {k: v[:, None] for k, v in masters.items()}
         x_s = self._gather_kept(x[self.kept_local])[:, None]
-        rows = self._apply_A(x)
+        rows = self._apply_A(x, x_s[:, 0])
         rows[self.kept_local] += self.coupling(columns)[self.kept_slice, 0]
         shares = {}
         for k, rows_k in self._rows.items():  # the link's own blocks on its slave rows
@@ -618,11 +618,11 @@ class Body:
         self.factor.solve(b, x)
         return self.scale * x.array
 
-    def _apply_A(self, y: Vector) -> Vector:
+    def _apply_A(self, y: Vector, y_s: Vector | None = None) -> Vector:
         """``A y = A_bulk y + Σ_k L_k y`` (conditions included) on owned DOFs.
 
         By the whole matrix where it is built for this state, else by the bulk matrix and
-        the links' block.
+        the links' block (``y_s``: y on every contact DOF, where the caller has gathered it).
         """
         x, Ay = self._vectors[0], self._vectors[2]
         x.array[:] = y
@@ -631,7 +631,7 @@ class Body:
             return Ay.array.copy()
         self.bulk_matrix().mult(x, Ay)
         out = Ay.array.copy()
-        y_s = self._gather_kept(y[self.kept_local])
+        y_s = self._gather_kept(y[self.kept_local]) if y_s is None else y_s
         out[self.kept_local] += (self.L_bc @ y_s)[self.kept_slice]
         return out
 

@@ -290,7 +290,7 @@ def dofs_within_layers(
     marker.scatter_forward()
     cells = W.dofmap.list
     for layer in range(layers):
-        before = marker.array.copy()
+        before = marker.array.copy() if most is not None else None
         hit = cells[marker.array[cells].max(axis=1) > 0]
         marker.array[hit.ravel()] = 1
         marker.scatter_reverse(dolfinx.la.InsertMode.add)

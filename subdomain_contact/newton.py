@@ -192,8 +192,8 @@ class _Callbacks:
                 scale = self.scale
                 # iterative bodies: a field ahead of the slowest one is asked for η of the
                 # slowest one's progress, not η of its own small residual
-                pace = max((v / scale[f] for f, v in norms.items() if scale[f] > 0), default=0)
-                pace = pace if self.scaled else 0.0
+                ratios = [v / scale[f] for f, v in norms.items() if scale[f] > 0]
+                pace = max(ratios, default=0.0) if self.scaled else 0.0
                 floor = {f: 1e-3 * self.rtol * scale[f] for f in norms}
                 atol = {
                     f: max(self.eta * max(v, pace * scale[f]), floor[f]) for f, v in norms.items()
