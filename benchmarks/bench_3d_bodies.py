@@ -13,7 +13,14 @@ above the one before it (the largest over the ranks; Linux: the peak is reset th
 ``/proc/self/clear_refs``), and the largest difference between the two solutions over T, φ
 and the three components of u, each relative to the field's range. ``--bodies iterative``
 solves the subdomain route's bodies by GMRES + GAMG per field; ``--no-monolithic`` leaves the
-monolithic Newton out where it does not fit; ``--history`` prints each Newton's iterates.
+monolithic Newton out where it does not fit; ``--history`` prints each Newton's iterates,
+``--progress`` a line per iterate as it comes; ``--gamg`` also runs the monolithic Newton
+with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, stopping at Newton's tolerance
+per field) and prints its outcome. ``--mumps-estimate`` runs no Newton: it prints
+MUMPS's own estimate of the monolithic factorisation's memory (INFOG(16), INFOG(17), in-core,
+after its analysis of the merged Jacobian at 300 K; the factorisation is then refused by a
+1 MB cap, ICNTL(23)), to set beside the measured peaks where the monolithic Newton runs and
+to tell whether it fits where it does not.
 
 Run: ``./dev python benchmarks/bench_3d_bodies.py`` (``--sizes 0.05 0.025``), and under
 ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``: the monolithic Newton spreads the blocks over
@@ -42,10 +49,20 @@ parser.add_argument(
     "3D body above system.ITERATIVE_ABOVE DOFs",
 )  # fmt: skip
 parser.add_argument("--history", action="store_true", help="print each Newton's history")
+parser.add_argument("--progress", action="store_true", help="a line per Newton iterate")
+parser.add_argument(
+    "--gamg", action="store_true", help="also the monolithic Newton by GMRES + field-split GAMG"
+)
+parser.add_argument(
+    "--mumps-estimate", action="store_true",
+    help="no Newton: MUMPS's estimate of the monolithic factorisation's memory",
+)  # fmt: skip
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 placement = "groups" if comm.size > 1 else "shared"
 #: (field, component) pairs compared.
+#: MUMPS's megabyte (10⁶ bytes, its INFOG(16) and INFOG(17)) in GiB.
+GIB = 1e6 / 2**30
 FIELDS = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
 
 
@@ -56,7 +73,7 @@ def newton(scene, linear, reference=None, bodies="direct"):
     tic = time.perf_counter()
     with sc.System(squeezed_row(scene), solver=bodies) as system:
         system.reset({"temperature": 300.0})
-        result = sc.solve(system, linear, rtol=1e-12)
+        result = sc.solve(system, linear, rtol=1e-12, progress=args.progress)
         seconds = comm.allreduce(time.perf_counter() - tic, op=MPI.MAX)
         memory = comm.allreduce((resident("VmHWM") - base) / 2**20, op=MPI.MAX)
         dofs = system.num_dofs()
@@ -70,6 +87,34 @@ def newton(scene, linear, reference=None, bodies="direct"):
     return result, seconds, memory, dofs, compared
 
 
+def mumps_estimate(size: float) -> None:
+    """Print MUMPS's estimate of the monolithic factorisation at 300 K [GiB]."""
+    # ICNTL(23) = 1 MB: MUMPS analyses, then refuses the factorisation (INFOG(1) = -19)
+    monolithic = sc.Monolithic({**sc.DIRECT, "mat_mumps_icntl_23": "1"})
+    scene = blocks_row_scene(args.count, size, comm=comm, placement="shared")
+    tic = time.perf_counter()
+    with sc.System(squeezed_row(scene)) as system:
+        system.reset({"temperature": 300.0})
+        system.apply_conditions()
+        system.assemble_jacobian()
+        monolithic.setup(system)
+        factor = monolithic.ksp.getPC().getFactorMatrix()
+        status, largest, total = (factor.getMumpsInfog(i) for i in (1, 16, 17))
+        rows = monolithic.K.getSize()[0]
+        monolithic.destroy()
+    if comm.rank == 0:
+        print(
+            f"size {size}: {rows} rows, {comm.size} ranks: MUMPS estimates {largest * GIB:.2f} "
+            f"GiB on its largest rank, {total * GIB:.2f} GiB in all (INFOG(1) = {status}, "
+            f"{time.perf_counter() - tic:.0f} s)",
+            flush=True,
+        )
+
+
+if args.mumps_estimate:
+    for size in args.sizes:
+        mumps_estimate(size)
+    raise SystemExit
 if comm.rank == 0:
     print(
         "| size [m] | DOFs | masters | Newton (sub, mono) | inner rounds | factorisations "
@@ -77,6 +122,26 @@ if comm.rank == 0:
         "| difference |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def gamg(size: float, reference) -> None:
+    """Print the outcome of the monolithic Newton by GMRES + field-split GAMG."""
+    linear = sc.Monolithic(sc.FIELDSPLIT_GAMG, inexact=True)
+    scene = blocks_row_scene(args.count, size, comm=comm, placement="shared")
+    try:
+        result, seconds, memory, _, difference = newton(scene, linear, reference)
+        apart = "—" if reference is None else f"{difference:.1e}"
+        outcome = (
+            f"{result.iterations} Newton steps ({result.line_search}), {result.rounds} GMRES "
+            f"iterations, {seconds:.1f} s, {memory:.2f} GiB, difference from MUMPS {apart}"
+        )
+    except sc.NewtonConvergenceError as failure:
+        outcome = f"failed: {str(failure).splitlines()[0]}"
+    linear.destroy()
+    if comm.rank == 0:
+        print(f"size {size}, monolithic GMRES + field-split GAMG: {outcome}", flush=True)
+
+
 for size in args.sizes:
     mono, mono_seconds, mono_memory, reference = None, float("nan"), float("nan"), None
     if not args.no_monolithic:
@@ -104,3 +169,5 @@ for size in args.sizes:
             print(f"subdomain Newton:\n{sub.table()}", flush=True)
             if mono is not None:
                 print(f"monolithic Newton:\n{mono.table()}", flush=True)
+    if args.gamg:
+        gamg(size, reference)

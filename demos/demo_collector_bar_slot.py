@@ -246,7 +246,7 @@ for bar_height in HEIGHTS:
             solver = route(linear)
             system.reset({"temperature": START})
             tic = time.perf_counter()
-            result = sc.solve(system, solver, rtol=1e-10)
+            result = sc.solve(system, solver, rtol=1e-10, progress=True)
             key = f"{setup}, bar {1e3 * bar_height:.0f} mm, {linear}"
             runs[key] = read(system, result) | {"wall_seconds": time.perf_counter() - tic}
             states[key] = system.state()
@@ -295,7 +295,7 @@ for setup in () if args.no_study or args.small else args.setups:
         with sc.System(problem(load(0.16, coarsening), setup)) as system:
             solver = route(args.linear[0])
             system.reset({"temperature": START})
-            result = sc.solve(system, solver, rtol=1e-10)
+            result = sc.solve(system, solver, rtol=1e-10, progress=True)
             drop = 1e3 * sc.voltage_drop(system, "top", "bar_end")
             levels.append((coarsening, sum(system.num_dofs().values()), drop, result.iterations))
             solver.destroy()

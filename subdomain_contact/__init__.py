@@ -27,7 +27,7 @@ from subdomain_contact.data import load_contact, load_material
 from subdomain_contact.history import History
 from subdomain_contact.io import plot_vtk, write_vtk
 from subdomain_contact.laws import PowerLaw, Table
-from subdomain_contact.monolithic import BDDC, CG_GAMG, Monolithic
+from subdomain_contact.monolithic import BDDC, CG_GAMG, FIELDSPLIT_GAMG, Monolithic
 from subdomain_contact.newton import (
     MAX_TEMPERATURE_STEP,
     NewtonConvergenceError,
@@ -79,6 +79,7 @@ __all__ = [
     "BDDC",
     "CG_GAMG",
     "DIRECT",
+    "FIELDSPLIT_GAMG",
     "MAX_TEMPERATURE_STEP",
     "Contact",
     "Convection",

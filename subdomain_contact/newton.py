@@ -150,6 +150,8 @@ class _Callbacks:
     def __init__(self, system: System, linear, rtol: float, max_it: int, monitor, lag: int) -> None:
         self.system, self.linear, self.rtol, self.max_it = system, linear, rtol, max_it
         self.monitor, self.lag, self.jacobians = monitor, lag, 0
+        self.progress: str | None = None  # the line search's name, to print a line per iterate
+        self.start = time.perf_counter()
         self.max_step: float | None = None  # [K]
         self.result = Result()
         self.scale: dict[str, float] = {}
@@ -244,9 +246,11 @@ class _Callbacks:
         if it == 0:  # the scale: the cold state's residual or the initial one, the larger
             for name, value in fields.items():
                 self.scale[name] = max(self.scale.get(name, 0.0), value)
+        progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
+        if self.progress is not None:
+            self._print(self.result.history[-1], max(progress, default=0.0))
         if self.system.is_linear and it >= 1 and self.inner_converged:
             return reasons.CONVERGED_FNORM_RELATIVE  # one exact step: the inner solve's rtol
-        progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
         # the slowest field sets the pace
         self.eta = min(self.forcing, max(progress, default=self.forcing))
         if all(v <= self.rtol * self.scale[n] for n, v in fields.items()):
@@ -256,6 +260,16 @@ class _Callbacks:
         if it >= self.max_it:
             return reasons.DIVERGED_MAX_IT
         return reasons.ITERATING
+
+    def _print(self, step: NewtonStep, relative: float) -> None:
+        """One progress line (rank 0): the iterate, its residual relative to the scale."""
+        if self.system.comm.rank == 0:
+            print(
+                f"Newton ({self.progress}) {step.iteration:3d}: max_f |F_f|/scale_f "
+                f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}, "
+                f"{time.perf_counter() - self.start:.0f} s",
+                flush=True,
+            )
 
     def _guard(self, action) -> None:
         """Run a callback; keep its exception for the error message (SNES only sees a code)."""
@@ -325,6 +339,7 @@ def solve(
     prefix: str = "sc_newton_",
     monitor: Callable[[int], None] | None = None,
     max_temperature_step: float = MAX_TEMPERATURE_STEP,
+    progress: bool = False,
 ) -> Result:
     """Newton's method on the system, from its current state.
 
@@ -360,6 +375,8 @@ def solve(
         prefix: Options prefix of the SNES (``-<prefix>snes_*``).
         monitor: Called with the iteration number at every iterate, the system holding it
             (its time is the caller's to exclude).
+        progress: Print a line per iterate on rank 0 (line search, residual relative to the
+            scale, inner rounds, step, seconds since the attempt began): for long runs.
 
     Raises:
         NewtonConvergenceError: Newton (or an inner solve) failed with every line search;
@@ -381,7 +398,7 @@ def solve(
                 system.set_state(initial)
             try:
                 result = _newton(system, linear, rtol, max_it, attempt, lag_jacobian, prefix,
-                                 monitor, max_temperature_step)  # fmt: skip
+                                 monitor, max_temperature_step, progress)  # fmt: skip
                 break
             except NewtonConvergenceError as failure:
                 failures.append((attempt, failure))
@@ -418,9 +435,11 @@ def _newton(
     prefix: str,
     monitor: Callable[[int], None] | None,
     max_temperature_step: float,
+    progress: bool,
 ) -> Result:
     """One Newton run with one line search, from the system's current state."""
     callbacks = _Callbacks(system, linear, rtol, max_it, monitor, lag_jacobian)
+    callbacks.progress = line_search if progress else None
     x, f = system.create_vector(), system.create_vector()
     callbacks.scale = _cold_residuals(system, f)
     system.apply_conditions()

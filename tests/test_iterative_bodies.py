@@ -7,6 +7,10 @@ from petsc4py import PETSc
 
 import subdomain_contact as sc
 from subdomain_contact import system as system_module
+from subdomain_contact.monolithic import field_splits
+from subdomain_contact.newton import FORCING, FORCING_ITERATIVE
+from subdomain_contact.physics import FIELDS
+from subdomain_contact.subdomain import Tolerance
 from verification.cases import (
     blocks3d_scene,
     blocks_row_scene,
@@ -172,3 +176,104 @@ def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
     # both Newtons stop at 1e-12 of the first residual; measured ≤ 1e-13 relative to each
     # field's range (2e-14 on 4 blocks of 1.5k DOFs): 100× margin for other BLAS kernels
     assert max(errors) <= 1e-11
+
+
+class _Spy:
+    """A linear solver that records the per-field tolerance Newton asks of each inner solve."""
+
+    def __init__(self, linear) -> None:
+        self.linear, self.asked = linear, []
+
+    def check(self, system) -> None:
+        self.linear.check(system)
+
+    def setup(self, system) -> None:
+        self.linear.setup(system)
+
+    def solve(self, b, tolerance):
+        self.asked.append(dict(tolerance.atol))
+        return self.linear.solve(b, tolerance)
+
+
+@pytest.mark.parametrize("bodies", ["direct", "iterative"])
+def test_newton_asks_each_field_for_eta_of_the_slowest_fields_progress(comm, bodies, capsys):
+    """The inner tolerance per field (newton.py's docstring), and the progress line.
+
+    Inner solve k starts from iterate k's residual F_f, scale s_f; ``P = max_g F_g/s_g``,
+    ``η = min(forcing, P)``. Iterative bodies: ``atol_f = η max(F_f, P s_f)``, so no field is
+    asked for less than η P of its scale and the slowest field keeps ``η F_f``. Factorised
+    bodies: ``η F_f``. Both above the floor ``1e-3 rtol s_f``.
+    """
+    rtol = 1e-12
+    with sc.System(squeezed_row(blocks_row_scene(4, 0.05, comm=comm)), solver=bodies) as system:
+        system.reset({"temperature": 300.0})
+        spy = _Spy(sc.Subdomains())
+        result = sc.solve(system, spy, rtol=rtol, line_search="basic", progress=True)
+        spy.linear.destroy()
+    iterative = bodies == "iterative"
+    forcing = FORCING_ITERATIVE if iterative else FORCING
+    assert len(spy.asked) == result.iterations
+    scale = result.scale
+    for step, atol in zip(result.history, spy.asked, strict=False):
+        pace = max(v / scale[f] for f, v in step.fields.items())
+        eta = min(forcing, pace)
+        for f, v in step.fields.items():
+            wanted = eta * (max(v, pace * scale[f]) if iterative else v)
+            # the same arithmetic in another order: a few ulps
+            assert atol[f] == pytest.approx(max(wanted, 1e-3 * rtol * scale[f]), rel=1e-12)
+        if iterative:  # no field asked for less than η P of its scale
+            assert min(atol[f] / scale[f] for f in atol) >= eta * pace * (1 - 1e-12)
+    # one progress line per iterate, on rank 0 only, the last one at Newton's own measure
+    lines = [s for s in capsys.readouterr().out.splitlines() if s.startswith("Newton (basic)")]
+    assert len(lines) == (result.iterations + 1 if comm.rank == 0 else 0)
+    if comm.rank == 0:
+        last = float(lines[-1].split("scale_f ")[1].split(",")[0])
+        assert last == pytest.approx(result.relative_residuals()[-1], rel=5e-3)  # 3 digits
+
+
+def test_field_splits_partition_the_merged_rows_and_gmres_meets_each_fields_tolerance(comm):
+    """The monolithic field split: every owned row once, in its field's set, u blocked by node.
+
+    Then one inexact solve of the row's coupled Jacobian at 300 K by GMRES + field-split GAMG
+    (``Monolithic(inexact=True)``): its residual, recomputed by the system's own product
+    (the blocks, not the merged matrix), meets the tolerance asked of every field.
+    """
+    with sc.System(squeezed_row(blocks_row_scene(4, 0.05, comm=comm))) as system:
+        start = comm.exscan(system.local_size) or 0
+        splits = field_splits(system)
+        seen = np.zeros(system.local_size, dtype=int)
+        for name, iset in splits:
+            rows = iset.getIndices() - start
+            assert np.all((rows >= 0) & (rows < system.local_size))  # owned rows only
+            assert np.all(system.field_of[rows] == FIELDS.index(name))
+            seen[rows] += 1
+            if name == "displacement":  # the 6 rigid motions attached, orthonormal
+                vecs = iset.query("nearnullspace").getVecs()
+                gram = np.array([[u.dot(v) for v in vecs] for u in vecs])
+                assert np.allclose(gram, np.eye(6), atol=1e-12)
+        assert np.all(seen == 1)
+        for _, iset in splits:
+            iset.destroy()
+
+        system.reset({"temperature": 300.0})
+        system.apply_conditions()
+        system.assemble_jacobian()
+        b, Jy = system.create_vector(), system.create_vector()
+        system.residual(b)
+        norms = system.field_norms(b)
+        # 1e-6 of each field's residual: the Newton forcing of the iterative route is 1e-4
+        atol = {f: 1e-6 * v for f, v in norms.items()}
+        linear = sc.Monolithic(sc.FIELDSPLIT_GAMG, inexact=True)
+        linear.setup(system)
+        y, inner = linear.solve(b.array_r.copy(), Tolerance(atol=atol))
+        Jy.array[:] = y
+        system.mult(Jy.copy(), Jy)
+        Jy.aypx(-1.0, b)
+        reached = system.field_norms(Jy)
+        linear.destroy()
+        b.destroy()
+        Jy.destroy()
+    assert inner.rounds > 1  # GMRES iterations, not one direct solve
+    # the merged matrix and the blocks' product agree to round-off (1e-12 of ‖b_f‖ at most)
+    for f in atol:
+        assert reached[f] <= atol[f] + 1e-12 * norms[f], f
