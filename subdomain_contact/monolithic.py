@@ -226,7 +226,7 @@ def field_splits(system: System) -> list[tuple[str, PETSc.IS]]:
     start = comm.exscan(system.local_size) or 0  # None on rank 0
     splits = []
     for field in system.problem.fields:
-        rows, points, components = [], [], []
+        rows, points, components = [np.zeros(0, int)], [np.zeros((0, 3))], [np.zeros(0, int)]
         for name, body in system.bodies.items():
             V, parent_of = body.forms.collapsed(field)
             bs, owned = V.dofmap.index_map_bs, V.dofmap.index_map.size_local
@@ -269,8 +269,12 @@ def _rigid_motions(
             v.array[at] = mode("displacement", c, x[at])
         for q in basis:  # modified Gram-Schmidt
             v.axpy(-v.dot(q), q)
-        v.scale(1.0 / v.norm())
-        basis.append(v)
+        norm = v.norm()
+        if norm > 0:  # not where every row lies on a rotation's axis
+            v.scale(1.0 / norm)
+            basis.append(v)
+        else:
+            v.destroy()
     space = PETSc.NullSpace().create(vectors=basis, comm=comm)
     destroy(*basis)  # the space holds its references
     return space
