@@ -46,7 +46,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave_map
-from subdomain_contact.modes import modes
+from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor, condensation
@@ -518,9 +518,8 @@ class Body:
             if name == "displacement":
                 iset.setBlockSize(bs)
                 points = V.tabulate_dof_coordinates()[: len(nodes)][order, :bs]
-                total = self.comm.allreduce(np.array([*points.sum(axis=0), len(points)]))
                 coordinates = PETSc.Vec().createWithArray(
-                    (points - total[:bs] / max(total[bs], 1.0)).ravel(), bsize=bs, comm=self.comm
+                    (points - centre(points, self.comm)).ravel(), bsize=bs, comm=self.comm
                 )
                 space = PETSc.NullSpace().createRigidBody(coordinates)
                 coordinates.destroy()
@@ -534,28 +533,19 @@ class Body:
         fields, dim = self.forms.fields, self.forms.W.mesh.geometry.dim
         V, _ = self.forms.collapsed(fields[0], 0 if fields[0] == "displacement" else None)
         owned = V.dofmap.index_map.size_local
-        points = V.tabulate_dof_coordinates()[:owned]
-        total = self.comm.allreduce(np.array([*points.sum(axis=0), len(points)]), op=MPI.SUM)
-        centre = total[:3] / max(total[3], 1.0)
-        basis: list[PETSc.Vec] = []
+        middle = centre(V.tabulate_dof_coordinates()[:owned], self.comm)
+        vectors: list[PETSc.Vec] = []
         for mode in modes(fields, dim):
             v = self.A_bulk.createVecRight()
             for name in fields:
                 for c in range(dim) if name == "displacement" else [None]:
                     V, parent_of = self.forms.collapsed(name, c)
                     owned = V.dofmap.index_map.size_local
-                    x = V.tabulate_dof_coordinates()[:owned] - centre
+                    x = V.tabulate_dof_coordinates()[:owned] - middle
                     v.array[parent_of[:owned]] = mode(name, c, x)
-            for q in basis:  # modified Gram-Schmidt
-                v.axpy(-v.dot(q), q)
-            norm = v.norm()
-            if norm > 0:
-                v.scale(1.0 / norm)
-                basis.append(v)
-            else:
-                v.destroy()
-        space = PETSc.NullSpace().create(vectors=basis, comm=self.comm)
-        self._near_null = [space, *basis]
+            vectors.append(v)
+        space = span(vectors, self.comm)
+        self._near_null = [space]
         return space
 
     def set_rtol(self, rtol: float) -> None:

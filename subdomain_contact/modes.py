@@ -11,8 +11,10 @@ from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
 
-__all__ = ["Mode", "modes"]
+__all__ = ["Mode", "centre", "modes", "span"]
 
 #: ``mode(field, component, x)``: the mode's values [K, V or m] at points ``x`` (n × 3, m).
 Mode = Callable[[str, int | None, npt.NDArray[np.float64]], npt.NDArray[np.float64]]
@@ -45,3 +47,29 @@ def modes(fields: tuple[str, ...], dim: int) -> list[Mode]:
         planes = [(0, 1)] if dim == 2 else [(0, 1), (1, 2), (0, 2)]
         out += [rotation(a, b) for a, b in planes]
     return out
+
+
+def centre(points: npt.NDArray[np.float64], comm: MPI.Comm) -> npt.NDArray[np.float64]:
+    """The mean of ``points`` (n × d, each rank its own) over every rank [m]."""
+    total = comm.allreduce(np.array([*points.sum(axis=0), len(points)]))
+    return total[:-1] / max(total[-1], 1.0)
+
+
+def span(vectors: list[PETSc.Vec], comm: MPI.Comm) -> PETSc.NullSpace:
+    """An orthonormal basis of ``vectors`` (modified Gram-Schmidt) as a near-null space.
+
+    A vector that vanishes (a rotation about an axis every row lies on) is left out. The
+    vectors are given to the space, which holds them: the caller destroys the space alone.
+    """
+    basis: list[PETSc.Vec] = []
+    for v in vectors:
+        for q in basis:
+            v.axpy(-v.dot(q), q)
+        norm = v.norm()
+        if norm > 0:
+            v.scale(1.0 / norm)
+            basis.append(v)
+    space = PETSc.NullSpace().create(vectors=basis, comm=comm)
+    for v in vectors:
+        v.destroy()
+    return space

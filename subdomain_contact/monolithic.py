@@ -20,7 +20,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
-from subdomain_contact.modes import modes
+from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp, ordered
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
@@ -258,23 +258,13 @@ def _rigid_motions(
     comm: MPI.Comm, points: npt.NDArray[np.float64], components: npt.NDArray, dim: int
 ) -> PETSc.NullSpace:
     """The rigid motions on rows of displacement component ``components`` at ``points``."""
-    total = comm.allreduce(np.array([*points.sum(axis=0), len(points)]))
-    x = points - total[:3] / max(total[3], 1.0)
-    basis: list[PETSc.Vec] = []
+    x = points - centre(points, comm)
+    vectors = []
     for mode in modes(("displacement",), dim):
         v = PETSc.Vec().createMPI((len(x), PETSc.DETERMINE), comm=comm)
         v.array[:] = 0.0
         for c in range(dim):
             at = components == c
             v.array[at] = mode("displacement", c, x[at])
-        for q in basis:  # modified Gram-Schmidt
-            v.axpy(-v.dot(q), q)
-        norm = v.norm()
-        if norm > 0:  # not where every row lies on a rotation's axis
-            v.scale(1.0 / norm)
-            basis.append(v)
-        else:
-            v.destroy()
-    space = PETSc.NullSpace().create(vectors=basis, comm=comm)
-    destroy(*basis)  # the space holds its references
-    return space
+        vectors.append(v)
+    return span(vectors, comm)

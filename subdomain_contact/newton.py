@@ -150,7 +150,7 @@ class _Callbacks:
     def __init__(self, system: System, linear, rtol: float, max_it: int, monitor, lag: int) -> None:
         self.system, self.linear, self.rtol, self.max_it = system, linear, rtol, max_it
         self.monitor, self.lag, self.jacobians = monitor, lag, 0
-        self.progress: str | None = None  # the line search's name, to print a line per iterate
+        self.announce: str | None = None  # the line search's name, to print a line per iterate
         self.start = time.perf_counter()
         self.max_step: float | None = None  # [K]
         self.result = Result()
@@ -247,7 +247,7 @@ class _Callbacks:
             for name, value in fields.items():
                 self.scale[name] = max(self.scale.get(name, 0.0), value)
         progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
-        if self.progress is not None:
+        if self.announce is not None:
             self._print(self.result.history[-1], max(progress, default=0.0))
         if self.system.is_linear and it >= 1 and self.inner_converged:
             return reasons.CONVERGED_FNORM_RELATIVE  # one exact step: the inner solve's rtol
@@ -265,7 +265,7 @@ class _Callbacks:
         """One progress line (rank 0): the iterate, its residual relative to the scale."""
         if self.system.comm.rank == 0:
             print(
-                f"Newton ({self.progress}) {step.iteration:3d}: max_f |F_f|/scale_f "
+                f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
                 f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}, "
                 f"{time.perf_counter() - self.start:.0f} s",
                 flush=True,
@@ -439,7 +439,7 @@ def _newton(
 ) -> Result:
     """One Newton run with one line search, from the system's current state."""
     callbacks = _Callbacks(system, linear, rtol, max_it, monitor, lag_jacobian)
-    callbacks.progress = line_search if progress else None
+    callbacks.announce = line_search if progress else None
     x, f = system.create_vector(), system.create_vector()
     callbacks.scale = _cold_residuals(system, f)
     system.apply_conditions()

@@ -232,7 +232,7 @@ def test_newton_asks_each_field_for_eta_of_the_slowest_fields_progress(comm, bod
 
 
 def test_field_splits_partition_the_merged_rows_and_gmres_meets_each_fields_tolerance(comm):
-    """The monolithic field split: every owned row once, in its field's set, u blocked by node.
+    """The monolithic field split: every owned row once, in its field's set, u's rigid motions.
 
     Then one inexact solve of the row's coupled Jacobian at 300 K by GMRES + field-split GAMG
     (``Monolithic(inexact=True)``): its residual, recomputed by the system's own product
