@@ -75,6 +75,7 @@ class NewtonStep:
             (0 at iteration 0; 1 for a direct solve).
         step: The Newton step that produced this iterate relative to the state, the largest
             over the fields of ``max |δx_f| / max |x_f|`` (0 at iteration 0).
+        halvings: Times that step was halved (see :data:`RUNAWAY`).
     """
 
     iteration: int
@@ -82,6 +83,7 @@ class NewtonStep:
     fields: dict[str, float]
     inner_rounds: int
     step: float = 0.0
+    halvings: int = 0
 
 
 @dataclass
@@ -99,6 +101,7 @@ class Result:
         jacobians: Jacobians assembled (and handed to the linear solver's ``setup``).
         line_search: The line search that converged.
         shortened: Newton steps that the ``"limited"`` line search shortened.
+        halved: Halvings of full steps that ran away (see :data:`RUNAWAY`).
     """
 
     history: list[NewtonStep] = field(default_factory=list)
@@ -110,6 +113,7 @@ class Result:
     jacobians: int = 0
     line_search: str = ""
     shortened: int = 0
+    halved: int = 0
 
     @property
     def iterations(self) -> int:
@@ -132,6 +136,7 @@ class Result:
             f"  {s.iteration:3d}  |F| = {s.residual:.3e}  "
             + "  ".join(f"{n} {v:.2e}" for n, v in s.fields.items())
             + f"  inner rounds {s.inner_rounds}  step {s.step:.1e}"
+            + (f" halved {s.halvings} times" if s.halvings else "")
             for s in self.history
         )
 
@@ -142,6 +147,10 @@ class NewtonConvergenceError(RuntimeError):
     def __init__(self, message: str, result: Result) -> None:
         super().__init__(message)
         self.result = result
+
+
+class RunawayStepError(RuntimeError):
+    """A full Newton step lands far out of equilibrium however it is halved."""
 
 
 class _Callbacks:
@@ -162,11 +171,13 @@ class _Callbacks:
         self.eta = self.forcing
         self.pending: InterfaceResult | None = None
         self.pending_rounds = 0
+        self.pending_halvings = 0
         self.inner_converged = False
         self.failure: Exception | None = None
         self.snes: PETSc.SNES | None = None
         self.direction: dict[str, float] = {}  # max |y_f| of the last full Newton step
         self.state: dict[str, float] = {}  # max |x_f| where it was taken
+        self.relative = np.inf  # max_f ‖F_f‖/scale_f at the current iterate
 
     def function(self, snes, x, f) -> None:
         self._guard(lambda: (self.system.set_state(x), self.system.residual(f)))
@@ -211,8 +222,12 @@ class _Callbacks:
 
         self._guard(inner)
 
-    def limit(self, x, y) -> None:
-        """The line search's pre-check: no temperature moves more than ``max_step``.
+    def precheck(self, x, y) -> None:
+        """The full steps' pre-check: :meth:`limit`, then :meth:`safeguard`."""
+        self._guard(lambda: (self.limit(y), self.safeguard(x, y)))
+
+    def limit(self, y) -> None:
+        """No temperature moves more than ``max_step`` (``"limited"``).
 
         The step ``y`` is shortened, all fields alike (its direction kept). Not for a linear
         problem: its one step is exact.
@@ -224,6 +239,42 @@ class _Callbacks:
             y.scale(self.max_step / largest)
             self.result.shortened += 1
 
+    def safeguard(self, x, y) -> None:
+        """Halve a full step that runs away (see :data:`RUNAWAY`); fail if that is not enough.
+
+        The residual at ``x − y`` is evaluated; while ``max_f ‖F_f‖/scale_f`` there is above
+        both :data:`RUNAWAY` and the current iterate's, ``y`` is halved, at most
+        :data:`HALVINGS` times. Not for a linear problem.
+
+        Raises:
+            RunawayStepError: The step still lands above after the last halving.
+        """
+        if self.system.is_linear:
+            return
+        w, f = x.duplicate(), x.duplicate()
+        try:
+            for halvings in range(HALVINGS + 1):
+                if halvings:
+                    y.scale(0.5)
+                    self.pending_halvings += 1
+                x.copy(w)
+                w.axpy(-1.0, y)
+                self.system.set_state(w)
+                self.system.residual(f)
+                norms = self.system.field_norms(f)
+                ratios = [v / self.scale[n] for n, v in norms.items() if self.scale[n] > 0]
+                landed = max(ratios, default=0.0)
+                if np.isfinite(landed) and landed <= max(RUNAWAY, self.relative):
+                    return
+        finally:
+            w.destroy()
+            f.destroy()
+        raise RunawayStepError(
+            f"the step from a residual of {self.relative:.1e} of its scale lands at "
+            f"{landed:.1e} even cut to 1/{2**HALVINGS}: Newton's linear model does not hold "
+            "that far (a contact law's exponential, a Joule runaway)"
+        )
+
     def converged(self, snes, it, norms) -> int:
         reasons = PETSc.SNES.ConvergedReason
         f = snes.getFunction()[0]
@@ -234,10 +285,14 @@ class _Callbacks:
             applied = self.system.field_max_norms(snes.getSolutionUpdate())
             step = max(_ratio(self.direction[n], self.state[n]) for n in fields)
             full = all(applied[n] >= 0.999 * self.direction[n] for n in fields)
-        self.result.history.append(NewtonStep(it, total, fields, self.pending_rounds, step))
+        halvings = self.pending_halvings
+        self.result.history.append(
+            NewtonStep(it, total, fields, self.pending_rounds, step, halvings)
+        )
+        self.result.halved += halvings
         if it > 0:
             self.result.inner.append(self.pending)
-        self.pending, self.pending_rounds = None, 0
+        self.pending, self.pending_rounds, self.pending_halvings = None, 0, 0
         if self.monitor is not None:
             self.system.set_state(snes.getSolution())
             self.monitor(it)
@@ -247,8 +302,9 @@ class _Callbacks:
             for name, value in fields.items():
                 self.scale[name] = max(self.scale.get(name, 0.0), value)
         progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
+        self.relative = max(progress, default=0.0)
         if self.announce is not None:
-            self._print(self.result.history[-1], max(progress, default=0.0))
+            self._print(self.result.history[-1], self.relative)
         if self.system.is_linear and it >= 1 and self.inner_converged:
             return reasons.CONVERGED_FNORM_RELATIVE  # one exact step: the inner solve's rtol
         # the slowest field sets the pace
@@ -266,8 +322,9 @@ class _Callbacks:
         if self.system.comm.rank == 0:
             print(
                 f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
-                f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}, "
-                f"{time.perf_counter() - self.start:.0f} s",
+                f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}"
+                + (f" halved {step.halvings} times" if step.halvings else "")
+                + f", {time.perf_counter() - self.start:.0f} s",
                 flush=True,
             )
 
@@ -300,6 +357,25 @@ STEP_RTOL = 1e-9
 #: first attempt: where full steps converge, shortened ones may cycle through the contacts'
 #: states (the squeezed Joule bars: full steps take 9, limited ones cycle with period 3).
 MAX_TEMPERATURE_STEP = 100.0
+
+#: A full step (``"basic"``, ``"limited"``) that lands where ``max_f ‖F_f‖/scale_f``
+#: exceeds this and the current iterate's is halved, at most :data:`HALVINGS` times, after
+#: which the attempt fails. 1e3 times the loads' residual is far outside Newton's region:
+#: converging full steps land at most at 2.8 (the row of four 3D blocks, 6k DOFs) and 34
+#: (the same row at 1.03M DOFs), runaways at 1e16 and beyond (that row's step 2 at 1.03M: an
+#: exponential closure overshot by tens of δ₀ lands at e^(overshoot/δ₀)). The bound is not
+#: free: Newton comes back down an exponential by one δ₀, a factor e of the residual, per
+#: step, so a step that lands at R costs about ln R steps (measured at 1.03M: from 947 to 6
+#: in 5 steps).
+RUNAWAY = 1e3
+
+#: The most halvings of one step: one or two rescue an overshoot (the row at 1.03M DOFs:
+#: steps 2 and 9 halved twice, 4 and 6 once, of 20+; the squeezed bars of the tests with
+#: δ₀ = 0.5 µm: 7 steps of 24 halved once); a step that needs more is not an overshoot but
+#: a climb Newton's model does not reach, left to the "limited" attempt (the collector bar
+#: slot from 300 K, 17k DOFs: its full steps cut 1 to 10 times at nearly every step from the 3rd,
+#: the residual stuck near 1e3 of its scale for 50 steps).
+HALVINGS = 2
 
 #: The largest forcing term η of an inexact inner solve (its residual relative to Newton's).
 #: Newton on unilateral contacts is semi-smooth: its Jacobian jumps where a node's closure
@@ -456,7 +532,8 @@ def _newton(
     snes.setConvergenceTest(callbacks.converged)
     if line_search == "limited":
         callbacks.max_step = max_temperature_step
-        snes.setLineSearchPreCheck(callbacks.limit)
+    if line_search in ("basic", "limited"):
+        snes.setLineSearchPreCheck(callbacks.precheck)
     callbacks.snes = snes
     snes.setTolerances(max_it=max_it + 1)
     ksp = snes.getKSP()
