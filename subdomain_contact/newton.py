@@ -48,11 +48,14 @@ __all__ = [
     "AUTO",
     "FORCING",
     "FORCING_ITERATIVE",
+    "HALVINGS",
     "MAX_IT",
     "MAX_TEMPERATURE_STEP",
+    "RUNAWAY",
     "NewtonConvergenceError",
     "NewtonStep",
     "Result",
+    "RunawayStepError",
     "solve",
 ]
 
@@ -362,19 +365,19 @@ MAX_TEMPERATURE_STEP = 100.0
 #: exceeds this and the current iterate's is halved, at most :data:`HALVINGS` times, after
 #: which the attempt fails. 1e3 times the loads' residual is far outside Newton's region:
 #: converging full steps land at most at 2.8 (the row of four 3D blocks, 6k DOFs) and 34
-#: (the same row at 1.03M DOFs), runaways at 1e16 and beyond (that row's step 2 at 1.03M: an
+#: (the same row at 1.01M DOFs), runaways at 1e16 and beyond (that row's step 2 at 1.01M: an
 #: exponential closure overshot by tens of δ₀ lands at e^(overshoot/δ₀)). The bound is not
 #: free: Newton comes back down an exponential by one δ₀, a factor e of the residual, per
-#: step, so a step that lands at R costs about ln R steps (measured at 1.03M: from 947 to 6
+#: step, so a step that lands at R costs about ln R steps (measured at 1.01M: from 947 to 6
 #: in 5 steps).
 RUNAWAY = 1e3
 
-#: The most halvings of one step: one or two rescue an overshoot (the row at 1.03M DOFs:
-#: steps 2 and 9 halved twice, 4 and 6 once, of 20+; the squeezed bars of the tests with
+#: The most halvings of one step: one or two rescue an overshoot (the row at 1.01M DOFs:
+#: steps 2 and 9 halved twice, 4 and 6 once, of 26; the squeezed bars of the tests with
 #: δ₀ = 0.5 µm: 7 steps of 24 halved once); a step that needs more is not an overshoot but
 #: a climb Newton's model does not reach, left to the "limited" attempt (the collector bar
-#: slot from 300 K, 17k DOFs: its full steps cut 1 to 10 times at nearly every step from the 3rd,
-#: the residual stuck near 1e3 of its scale for 50 steps).
+#: slot from 300 K, 17k DOFs: allowed 10 halvings, its full steps were cut 1 to 10 times at
+#: nearly every step from the 3rd, the residual stuck near 1e3 of its scale for 50 steps).
 HALVINGS = 2
 
 #: The largest forcing term η of an inexact inner solve (its residual relative to Newton's).
@@ -444,7 +447,8 @@ def solve(
             squeezed Joule bars: bt and l2 fail, full steps take 9); backtracking where full
             steps overshoot into unphysical states (the three-body cathode at 1 V from a
             cold start: full steps fail, bt takes 8), limited ones from a cold start to a hot
-            state (the collector bar slot, see :data:`MAX_TEMPERATURE_STEP`).
+            state (the collector bar slot, see :data:`MAX_TEMPERATURE_STEP`). A full or
+            limited step that runs away is halved, at most twice (:data:`RUNAWAY`).
         lag_jacobian: Rebuild the Jacobian every this many steps (modified Newton above 1).
         max_temperature_step: The largest temperature change of one step [K] of the
             ``"limited"`` line search (see :data:`MAX_TEMPERATURE_STEP`).
