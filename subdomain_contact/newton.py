@@ -181,9 +181,25 @@ class _Callbacks:
         self.direction: dict[str, float] = {}  # max |y_f| of the last full Newton step
         self.state: dict[str, float] = {}  # max |x_f| where it was taken
         self.relative = np.inf  # max_f ‖F_f‖/scale_f at the current iterate
+        self.trial: tuple[PETSc.Vec, PETSc.Vec] | None = None  # (x − y, F(x − y))
 
     def function(self, snes, x, f) -> None:
-        self._guard(lambda: (self.system.set_state(x), self.system.residual(f)))
+        def evaluate():
+            self.system.set_state(x)
+            if self.trial is not None and self.trial[0].equal(x):
+                self.trial[1].copy(f)  # the safeguard's, at the state the step lands on
+            else:
+                self.system.residual(f)
+            self.drop_trial()
+
+        self._guard(evaluate)
+
+    def drop_trial(self) -> None:
+        """Destroy the safeguard's last trial state and residual."""
+        if self.trial is not None:
+            for vec in self.trial:
+                vec.destroy()
+            self.trial = None
 
     def jacobian(self, snes, x, J, P) -> None:
         def assemble():
@@ -247,31 +263,30 @@ class _Callbacks:
 
         The residual at ``x − y`` is evaluated; while ``max_f ‖F_f‖/scale_f`` there is above
         both :data:`RUNAWAY` and the current iterate's, ``y`` is halved, at most
-        :data:`HALVINGS` times. Not for a linear problem.
+        :data:`HALVINGS` times. The last residual is kept for the line search, which
+        evaluates it at the same state next. Not for a linear problem.
 
         Raises:
             RunawayStepError: The step still lands above after the last halving.
         """
         if self.system.is_linear:
             return
-        w, f = x.duplicate(), x.duplicate()
-        try:
-            for halvings in range(HALVINGS + 1):
-                if halvings:
-                    y.scale(0.5)
-                    self.pending_halvings += 1
-                x.copy(w)
-                w.axpy(-1.0, y)
-                self.system.set_state(w)
-                self.system.residual(f)
-                norms = self.system.field_norms(f)
-                ratios = [v / self.scale[n] for n, v in norms.items() if self.scale[n] > 0]
-                landed = max(ratios, default=0.0)
-                if np.isfinite(landed) and landed <= max(RUNAWAY, self.relative):
-                    return
-        finally:
-            w.destroy()
-            f.destroy()
+        self.drop_trial()
+        self.trial = w, f = x.duplicate(), x.duplicate()  # kept for the line search
+        for halvings in range(HALVINGS + 1):
+            if halvings:
+                y.scale(0.5)
+                self.pending_halvings += 1
+            x.copy(w)
+            w.axpy(-1.0, y)
+            self.system.set_state(w)
+            self.system.residual(f)
+            norms = self.system.field_norms(f)
+            ratios = [v / self.scale[n] for n, v in norms.items() if self.scale[n] > 0]
+            landed = max(ratios, default=0.0)
+            if np.isfinite(landed) and landed <= max(RUNAWAY, self.relative):
+                return
+        self.drop_trial()
         raise RunawayStepError(
             f"the step from a residual of {self.relative:.1e} of its scale lands at "
             f"{landed:.1e} even cut to 1/{2**HALVINGS}: Newton's linear model does not hold "
@@ -557,6 +572,7 @@ def _newton(
         # petsc4py objects the garbage collector cannot see, which would keep the system
         cause = (callbacks.failure or error).with_traceback(None)
     callbacks.failure, callbacks.snes = None, None
+    callbacks.drop_trial()
     system.set_state(x)
     result.scale = dict(callbacks.scale)
     for obj in (snes, J, x, f):
