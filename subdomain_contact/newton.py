@@ -139,7 +139,7 @@ class Result:
             f"  {s.iteration:3d}  |F| = {s.residual:.3e}  "
             + "  ".join(f"{n} {v:.2e}" for n, v in s.fields.items())
             + f"  inner rounds {s.inner_rounds}  step {s.step:.1e}"
-            + (f" halved {s.halvings} times" if s.halvings else "")
+            + (f"  halvings {s.halvings}" if s.halvings else "")
             for s in self.history
         )
 
@@ -341,7 +341,7 @@ class _Callbacks:
             print(
                 f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
                 f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}"
-                + (f" halved {step.halvings} times" if step.halvings else "")
+                + (f", halvings {step.halvings}" if step.halvings else "")
                 + f", {time.perf_counter() - self.start:.0f} s",
                 flush=True,
             )
