@@ -80,10 +80,16 @@ def test_a_full_step_that_runs_away_is_halved_and_newton_converges(comm, monkeyp
     problem = dataclasses.replace(problem, contacts={"contact": contact})
     system = make_system(problem)
     system.reset({"temperature": 300.0})
+    residual, evaluations = system.residual, []
+    monkeypatch.setattr(system, "residual", lambda f: (evaluations.append(1), residual(f)))
     result = sc.solve(system, line_search="basic")
     state = system.state()
     # measured serially: 7 steps of 24 halved once
     assert result.halved >= 1
+    # the cold and the initial state, then one per trial of a step: the line search takes
+    # the safeguard's residual where the step lands (without it, one more per step)
+    assert len(evaluations) == 2 + result.iterations + result.halved
+    monkeypatch.undo()
     system.reset({"temperature": 300.0})
     monolithic = sc.Monolithic()
     sc.solve(system, monolithic, line_search="basic")
