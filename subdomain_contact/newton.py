@@ -104,7 +104,6 @@ class Result:
         jacobians: Jacobians assembled (and handed to the linear solver's ``setup``).
         line_search: The line search that converged.
         shortened: Newton steps that the ``"limited"`` line search shortened.
-        halved: Halvings of full steps that ran away (see :data:`RUNAWAY`).
     """
 
     history: list[NewtonStep] = field(default_factory=list)
@@ -116,12 +115,16 @@ class Result:
     jacobians: int = 0
     line_search: str = ""
     shortened: int = 0
-    halved: int = 0
 
     @property
     def iterations(self) -> int:
         """Newton iterations taken."""
         return self.history[-1].iteration if self.history else 0
+
+    @property
+    def halved(self) -> int:
+        """Halvings of full steps that ran away (see :data:`RUNAWAY`)."""
+        return sum(s.halvings for s in self.history)
 
     @property
     def rounds(self) -> int:
@@ -224,8 +227,7 @@ class _Callbacks:
                 scale = self.scale
                 # iterative bodies: a field ahead of the slowest one is asked for η of the
                 # slowest one's progress, not η of its own small residual
-                ratios = [v / scale[f] for f, v in norms.items() if scale[f] > 0]
-                pace = max(ratios, default=0.0) if self.scaled else 0.0
+                pace = max(self.ratios(norms), default=0.0) if self.scaled else 0.0
                 floor = {f: 1e-3 * self.rtol * scale[f] for f in norms}
                 atol = {
                     f: max(self.eta * max(v, pace * scale[f]), floor[f]) for f, v in norms.items()
@@ -281,9 +283,7 @@ class _Callbacks:
             w.axpy(-1.0, y)
             self.system.set_state(w)
             self.system.residual(f)
-            norms = self.system.field_norms(f)
-            ratios = [v / self.scale[n] for n, v in norms.items() if self.scale[n] > 0]
-            landed = max(ratios, default=0.0)
+            landed = max(self.ratios(self.system.field_norms(f)), default=0.0)
             if np.isfinite(landed) and landed <= max(RUNAWAY, self.relative):
                 return
         self.drop_trial()
@@ -292,6 +292,10 @@ class _Callbacks:
             f"{landed:.1e} even cut to 1/{2**HALVINGS}: Newton's linear model does not hold "
             "that far (a contact law's exponential, a Joule runaway)"
         )
+
+    def ratios(self, norms: dict[str, float]) -> list[float]:
+        """``‖F_f‖/scale_f`` of each field with a scale."""
+        return [v / self.scale[n] for n, v in norms.items() if self.scale[n] > 0]
 
     def converged(self, snes, it, norms) -> int:
         reasons = PETSc.SNES.ConvergedReason
@@ -303,11 +307,9 @@ class _Callbacks:
             applied = self.system.field_max_norms(snes.getSolutionUpdate())
             step = max(_ratio(self.direction[n], self.state[n]) for n in fields)
             full = all(applied[n] >= 0.999 * self.direction[n] for n in fields)
-        halvings = self.pending_halvings
         self.result.history.append(
-            NewtonStep(it, total, fields, self.pending_rounds, step, halvings)
+            NewtonStep(it, total, fields, self.pending_rounds, step, self.pending_halvings)
         )
-        self.result.halved += halvings
         if it > 0:
             self.result.inner.append(self.pending)
         self.pending, self.pending_rounds, self.pending_halvings = None, 0, 0
@@ -319,7 +321,7 @@ class _Callbacks:
         if it == 0:  # the scale: the cold state's residual or the initial one, the larger
             for name, value in fields.items():
                 self.scale[name] = max(self.scale.get(name, 0.0), value)
-        progress = [v / self.scale[n] for n, v in fields.items() if self.scale[n] > 0]
+        progress = self.ratios(fields)
         self.relative = max(progress, default=0.0)
         if self.announce is not None:
             self._print(self.result.history[-1], self.relative)
