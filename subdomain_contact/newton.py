@@ -46,6 +46,7 @@ from subdomain_contact.system import System
 
 __all__ = [
     "AUTO",
+    "EXPONENTIAL",
     "FORCING",
     "FORCING_ITERATIVE",
     "HALVINGS",
@@ -265,16 +266,20 @@ class _Callbacks:
 
         The residual at ``x − y`` is evaluated; while ``max_f ‖F_f‖/scale_f`` there is above
         both :data:`RUNAWAY` and the current iterate's, ``y`` is halved, at most
-        :data:`HALVINGS` times. The last residual is kept for the line search, which
+        :data:`HALVINGS` times, as long as each halving lowers the landing as an exponential's
+        overshoot does (:data:`EXPONENTIAL`). The last residual is kept for the line search, which
         evaluates it at the same state next. Not for a linear problem.
 
         Raises:
-            RunawayStepError: The step still lands above after the last halving.
+            RunawayStepError: The step still lands above after the last halving, or a
+                halving lowered the landing too little.
         """
         if self.system.is_linear:
             return
         self.drop_trial()
         self.trial = w, f = x.duplicate(), x.duplicate()  # kept for the line search
+        bound = max(RUNAWAY, self.relative)
+        previous = np.inf  # ln(landing / bound) before the last halving
         for halvings in range(HALVINGS + 1):
             if halvings:
                 y.scale(0.5)
@@ -284,12 +289,16 @@ class _Callbacks:
             self.system.set_state(w)
             self.system.residual(f)
             landed = max(self.ratios(self.system.field_norms(f)), default=0.0)
-            if np.isfinite(landed) and landed <= max(RUNAWAY, self.relative):
+            if np.isfinite(landed) and landed <= bound:
                 return
+            excess = np.log(landed / bound)
+            if np.isfinite(previous) and excess > EXPONENTIAL * previous:
+                break  # not an exponential's overshoot: a climb Newton's model does not reach
+            previous = excess
         self.drop_trial()
         raise RunawayStepError(
             f"the step from a residual of {self.relative:.1e} of its scale lands at "
-            f"{landed:.1e} even cut to 1/{2**HALVINGS}: Newton's linear model does not hold "
+            f"{landed:.1e} when cut to 1/{2**halvings}: Newton's linear model does not hold "
             "that far (a contact law's exponential, a Joule runaway)"
         )
 
@@ -379,8 +388,9 @@ STEP_RTOL = 1e-9
 MAX_TEMPERATURE_STEP = 100.0
 
 #: A full step (``"basic"``, ``"limited"``) that lands where ``max_f ‖F_f‖/scale_f``
-#: exceeds this and the current iterate's is halved, at most :data:`HALVINGS` times, after
-#: which the attempt fails. 1e3 times the loads' residual is far outside Newton's region:
+#: exceeds this and the current iterate's is halved while the landing falls as an
+#: exponential's (:data:`EXPONENTIAL`), at most :data:`HALVINGS` times; else the attempt
+#: fails. 1e3 times the loads' residual is far outside Newton's region:
 #: converging full steps land at most at 2.8 (the row of four 3D blocks, 6k DOFs) and 34
 #: (the same row at 1.01M DOFs), runaways at 1e16 and beyond (that row's step 2 at 1.01M: an
 #: exponential closure overshot by tens of δ₀ lands at e^(overshoot/δ₀)). The bound is not
@@ -389,13 +399,28 @@ MAX_TEMPERATURE_STEP = 100.0
 #: in 5 steps).
 RUNAWAY = 1e3
 
-#: The most halvings of one step: one or two rescue an overshoot (the row at 1.01M DOFs:
-#: steps 2 and 9 halved twice, 4 and 6 once, of 26; the squeezed bars of the tests with
-#: δ₀ = 0.5 µm: 7 steps of 24 halved once); a step that needs more is not an overshoot but
-#: a climb Newton's model does not reach, left to the "limited" attempt (the collector bar
-#: slot from 300 K, 17k DOFs: allowed 10 halvings, its full steps were cut 1 to 10 times at
-#: nearly every step from the 3rd, the residual stuck near 1e3 of its scale for 50 steps).
-HALVINGS = 2
+#: A halving goes on only while the landing falls as an exponential's does: its excess
+#: ``ln(R/B)`` over the bound ``B = max(RUNAWAY, current)`` at most this fraction of the one
+#: before. A closure overshot by n δ₀ lands at about ``B e^(n - d)``, ``d ≥ 0`` (its residual
+#: at no overshoot is within the bound), and half the step overshoots by less than n/2: the
+#: excess falls by more than half. A residual growing as a power p of the step falls by
+#: ``p ln 2`` only, a ratio above 2/3 for p ≤ 2 from an excess of 4.2 (R = 64 B) up: that
+#: climb is left to the ``"limited"`` attempt at once (measured on the collector bar slot
+#: from 300 K, 17k DOFs: from step 4 its landings fell by a factor of about 2.6 per halving,
+#: 1.3e5, 4.8e4, 1.7e4, ..., an excess ratio of 0.8, and, allowed 10 halvings without this
+#: test, its full steps were cut 5 or 6 times at every step, the residual held near 1e3 of
+#: its scale for 50 steps; the row of four blocks at 1.01M DOFs: 1.1e16, 6.0e4, 0.53 at
+#: step 2, a ratio of 0.14).
+EXPONENTIAL = 2 / 3
+
+#: The most halvings of one step. The largest landing the residual's norm measures is about
+#: 1e154 (its square overflows beyond): an overshoot of ln(1e154) = 354 δ₀, which 6 halvings
+#: bring to 5.5 δ₀, below ln :data:`RUNAWAY` = 6.9; one more for a landing beyond measure
+#: (an infinite norm), one spare. Measured: the row of four 3D blocks at 1.01M DOFs needed two
+#: (steps 2 and 9 of 26, one at steps 4 and 6) in one cold start, and more than two in
+#: another, whose step 12 overflowed; the squeezed bars of the tests with δ₀ = 0.5 µm one, at
+#: 7 of 24 steps.
+HALVINGS = 8
 
 #: The largest forcing term η of an inexact inner solve (its residual relative to Newton's).
 #: Newton on unilateral contacts is semi-smooth: its Jacobian jumps where a node's closure
@@ -465,7 +490,8 @@ def solve(
             steps overshoot into unphysical states (the three-body cathode at 1 V from a
             cold start: full steps fail, bt takes 8), limited ones from a cold start to a hot
             state (the collector bar slot, see :data:`MAX_TEMPERATURE_STEP`). A full or
-            limited step that runs away is halved, at most twice (:data:`RUNAWAY`).
+            limited step that runs away is halved while its landing falls as an
+            exponential's (:data:`RUNAWAY`).
         lag_jacobian: Rebuild the Jacobian every this many steps (modified Newton above 1).
         max_temperature_step: The largest temperature change of one step [K] of the
             ``"limited"`` line search (see :data:`MAX_TEMPERATURE_STEP`).
@@ -473,7 +499,8 @@ def solve(
         monitor: Called with the iteration number at every iterate, the system holding it
             (its time is the caller's to exclude).
         progress: Print a line per iterate on rank 0 (line search, residual relative to the
-            scale, inner rounds, step, seconds since the attempt began): for long runs.
+            scale, inner rounds, step, seconds since the attempt began), and why an attempt
+            failed before the next one starts: for long runs.
 
     Raises:
         NewtonConvergenceError: Newton (or an inner solve) failed with every line search;
@@ -499,6 +526,8 @@ def solve(
                 break
             except NewtonConvergenceError as failure:
                 failures.append((attempt, failure))
+                if progress and system.comm.rank == 0:
+                    print(f"Newton ({attempt}): {str(failure).splitlines()[0]}", flush=True)
         else:
             attempt, last = failures[-1]
             tried = "; ".join(f"line search {a}: {str(f).splitlines()[0]}" for a, f in failures)

@@ -104,6 +104,56 @@ def test_a_full_step_that_runs_away_is_halved_and_newton_converges(comm, monkeyp
         sc.solve(system, line_search="basic")
 
 
+class _Landing:
+    """A one-unknown system whose residual, relative to its scale, is ``law(x)``."""
+
+    is_linear, bodies, comm = False, {}, MPI.COMM_SELF
+
+    def __init__(self, law) -> None:
+        self.law, self.x = law, 0.0
+
+    def set_state(self, w) -> None:
+        self.x = w.array[0]
+
+    def residual(self, f) -> None:
+        with np.errstate(over="ignore"):  # an infinite landing, as an overflowing norm gives
+            f.array[0] = self.law(self.x)
+
+    def field_norms(self, f) -> dict[str, float]:
+        return {"temperature": float(f.array[0])}
+
+
+@pytest.mark.parametrize(
+    ("law", "overshoot", "halvings"),
+    [
+        (np.exp, 40.0, 3),  # e^40, e^20 and e^10 run away; e^5 = 148 is in
+        (np.exp, 1000.0, 8),  # beyond measure (inf), then e^500 ... e^7.8: HALVINGS exactly
+        (lambda x: 1e4 * x**2, 40.0, None),  # 1.6e7, 4e6: ln(R/1e3) falls to 0.86 of it, a climb
+    ],
+    ids=["exponential", "overflow", "power"],
+)
+def test_a_step_is_halved_while_its_landing_falls_as_an_exponentials(law, overshoot, halvings):
+    """The safeguard halves an exponential's overshoot, however far (the bound HALVINGS is
+    the overflow's), and gives a power-law climb up after one halving."""
+    system = _Landing(law)
+    callbacks = newton._Callbacks(system, None, 1e-10, 10, None, 1)
+    callbacks.scale, callbacks.relative = {"temperature": 1.0}, 1.0
+    x, y = (PETSc.Vec().createSeq(1, comm=MPI.COMM_SELF) for _ in range(2))
+    x.set(0.0)
+    y.set(-overshoot)  # the state x − y lands at the overshoot
+    if halvings is None:
+        with pytest.raises(newton.RunawayStepError, match="1/2:"):
+            callbacks.safeguard(x, y)
+        assert callbacks.pending_halvings == 1 and callbacks.trial is None
+    else:
+        callbacks.safeguard(x, y)
+        assert callbacks.pending_halvings == halvings
+        assert y.array[0] == -overshoot / 2**halvings
+        assert callbacks.trial[1].array[0] == law(overshoot / 2**halvings) <= newton.RUNAWAY
+        callbacks.drop_trial()
+    destroy(x, y)
+
+
 @pytest.mark.parametrize("depth", [0.0, 0.04], ids=["2d", "3d"])
 def test_sparse_strip_corrector_with_bodies_factorised_whole(comm, depth):
     """The cathode slot with mechanics, no Schur block (each S^α applied by a body solve) and

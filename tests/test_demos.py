@@ -291,7 +291,7 @@ def test_demo_transient_joule(shared_tmp, monkeypatch, comm):
 # Six Newton solves from the cold start (≈ 5 min serial on the development machine, 2
 # cores): the suite's 300 s guard against hangs is per test, so this one gets 3 times it.
 @pytest.mark.timeout(900)
-def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
+def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm, capsys):
     out = shared_tmp / "out_collector_bar_slot"
     # Each session runs four cold starts (CI time): serially the subdomain route with the
     # design study (the 174 mm bar); under mpiexec both routes on the base case, whose
@@ -303,6 +303,13 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm):
     comm.barrier()
     report = json.loads((out / "report.json").read_text())
     runs = report["runs"]
+    if comm.rank == 0:  # the progress line says why full steps gave up, before the limited
+        lines = capsys.readouterr().out.splitlines()
+        starts = [i for i, line in enumerate(lines) if line.startswith("Newton (limited)   0:")]
+        assert starts
+        for i in starts:  # the slot's climb: the safeguard's verdict on a halved step
+            assert lines[i - 1].startswith("Newton (basic): Newton failed after"), lines[i - 1]
+            assert "lands at" in lines[i - 1], lines[i - 1]
     for setup in ("constant", "pressure"):
         solved = [f"{setup}, bar 160 mm, subdomain"]
         if study:  # the design variant: a 174 mm bar, by the subdomain route
