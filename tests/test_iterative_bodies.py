@@ -184,6 +184,9 @@ def test_two_cold_starts_with_iterative_bodies_take_the_same_path_bit_for_bit(co
     With PETSc's default ``-vec_mdot_use_gemv`` (BLAS gemv, whose rounding follows the
     vectors' alignment) two such starts in one process differed after two steps (measured
     1.56087492e8 against 1.56087484e8 here): the module solvers sets PETSc's own kernel.
+    Measured with each of OpenBLAS's kernel sets (``OPENBLAS_CORETYPE``): passes with
+    Cooperlake (this machine's), SkylakeX, Haswell, Zen, Sandybridge, Nehalem and Prescott;
+    with gemv it fails with Cooperlake, Haswell and Zen, and passed once with Prescott.
     """
     histories = []
     for _ in range(2):
