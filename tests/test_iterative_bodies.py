@@ -192,14 +192,16 @@ def test_two_cold_starts_with_iterative_bodies_take_the_same_path_bit_for_bit(co
     options = PETSc.Options()
     options["vec_mdot_use_gemv"] = False  # read when a vector is created
     histories = []
-    for _ in range(2):
-        scene = blocks_row_scene(4, 0.06, comm=comm)
-        with sc.System(squeezed_row(scene), solver="iterative") as system:
-            system.reset({"temperature": 300.0})
-            with pytest.raises(sc.NewtonConvergenceError) as failed:
-                sc.solve(system, rtol=1e-12, max_it=2, line_search="basic")
-            histories.append([step.residual for step in failed.value.result.history])
-    options.delValue("vec_mdot_use_gemv")
+    try:  # the option is PETSc's global database: never left to the other tests
+        for _ in range(2):
+            scene = blocks_row_scene(4, 0.06, comm=comm)
+            with sc.System(squeezed_row(scene), solver="iterative") as system:
+                system.reset({"temperature": 300.0})
+                with pytest.raises(sc.NewtonConvergenceError) as failed:
+                    sc.solve(system, rtol=1e-12, max_it=2, line_search="basic")
+                histories.append([step.residual for step in failed.value.result.history])
+    finally:
+        options.delValue("vec_mdot_use_gemv")
     assert len(histories[0]) == 3 and histories[0] == histories[1]
 
 
