@@ -18,6 +18,19 @@ DIRECT: Mapping[str, str] = MappingProxyType(
 #: approximate minimum degree: see :func:`ordering`.
 AMD_ROWS = 100_000
 
+# Reproducible Krylov solves. PETSc's VecMDot (GMRES's orthogonalisation) goes through BLAS
+# gemv by default, whose kernels round differently with the alignment of the vectors in
+# memory: the same GMRES + GAMG body solve then differed between two runs of one script, and
+# between two solves in one process, at 1e-8 (GAMG's aggregation turns the round-off into a
+# different preconditioner), which Newton's path on an exponential closure amplifies.
+# PETSc's own unrolled kernel rounds the same way wherever the vectors lie: the row of four
+# 3D blocks at 11k DOFs repeats its Newton residuals bit for bit (three runs, serial and on 2
+# ranks; with gemv two runs differed), no slower (31k DOFs: 24.3 s against 29.3 s). At 1.01M
+# DOFs on 2 ranks another source remains (two runs parted at step 4). Read when a vector is
+# created; a user's own ``-vec_mdot_use_gemv`` is kept.
+if not PETSc.Options().hasName("vec_mdot_use_gemv"):
+    PETSc.Options().setValue("vec_mdot_use_gemv", False)
+
 
 def ordering(dim: int, rows: int, *, again: bool) -> int | None:
     """MUMPS's fill-reducing ordering, ICNTL(7), for a matrix of a mesh of dimension ``dim``.

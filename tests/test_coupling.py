@@ -129,12 +129,15 @@ class _Landing:
         (np.exp, 40.0, 3),  # e^40, e^20 and e^10 run away; e^5 = 148 is in
         (np.exp, 1000.0, 8),  # beyond measure (inf), then e^500 ... e^7.8: HALVINGS exactly
         (lambda x: 1e4 * x**2, 40.0, None),  # 1.6e7, 4e6: ln(R/1e3) falls to 0.86 of it, a climb
+        # 4e5, 2e5: proportional to the step, a penalty's new contact status: the full step
+        (lambda x: 1e4 * np.abs(x), 40.0, 0),
     ],
-    ids=["exponential", "overflow", "power"],
+    ids=["exponential", "overflow", "power", "penalty"],
 )
 def test_a_step_is_halved_while_its_landing_falls_as_an_exponentials(law, overshoot, halvings):
     """The safeguard halves an exponential's overshoot, however far (the bound HALVINGS is
-    the overflow's), and gives a power-law climb up after one halving."""
+    the overflow's), gives a power-law climb up after one halving, and keeps a full step whose
+    landing is proportional to it (a contact penalty's)."""
     system = _Landing(law)
     callbacks = newton._Callbacks(system, None, 1e-10, 10, None, 1)
     callbacks.scale, callbacks.relative = {"temperature": 1.0}, 1.0
@@ -149,7 +152,9 @@ def test_a_step_is_halved_while_its_landing_falls_as_an_exponentials(law, oversh
         callbacks.safeguard(x, y)
         assert callbacks.pending_halvings == halvings
         assert y.array[0] == -overshoot / 2**halvings
-        assert callbacks.trial[1].array[0] == law(overshoot / 2**halvings) <= newton.RUNAWAY
+        assert callbacks.trial[0].array[0] == overshoot / 2**halvings
+        assert callbacks.trial[1].array[0] == law(overshoot / 2**halvings)
+        assert (law(overshoot / 2**halvings) <= newton.RUNAWAY) == (halvings > 0)
         callbacks.drop_trial()
     destroy(x, y)
 

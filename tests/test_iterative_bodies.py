@@ -179,29 +179,23 @@ def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
 
 
 def test_two_cold_starts_with_iterative_bodies_take_the_same_path_bit_for_bit(comm):
-    """With ``-vec_mdot_use_gemv 0``, GMRES + GAMG bodies round the same way wherever their
-    vectors lie in memory.
+    """GMRES + GAMG bodies round the same way wherever their vectors lie in memory.
 
-    With PETSc's default (BLAS gemv, whose rounding follows the vectors' alignment) two such
-    starts in one process differed after two steps (measured 1.56087492e8 against
-    1.56087484e8 here). Not the package's default yet (README: runs that repeat).
+    With PETSc's default ``-vec_mdot_use_gemv`` (BLAS gemv, whose rounding follows the
+    vectors' alignment) two such starts in one process differed after two steps (measured
+    1.56087492e8 against 1.56087484e8 here): the module solvers sets PETSc's own kernel.
     Measured with each of OpenBLAS's kernel sets (``OPENBLAS_CORETYPE``): passes with
     Cooperlake (this machine's), SkylakeX, Haswell, Zen, Sandybridge, Nehalem and Prescott;
     with gemv it fails with Cooperlake, Haswell and Zen, and passed once with Prescott.
     """
-    options = PETSc.Options()
-    options["vec_mdot_use_gemv"] = False  # read when a vector is created
     histories = []
-    try:  # the option is PETSc's global database: never left to the other tests
-        for _ in range(2):
-            scene = blocks_row_scene(4, 0.06, comm=comm)
-            with sc.System(squeezed_row(scene), solver="iterative") as system:
-                system.reset({"temperature": 300.0})
-                with pytest.raises(sc.NewtonConvergenceError) as failed:
-                    sc.solve(system, rtol=1e-12, max_it=2, line_search="basic")
-                histories.append([step.residual for step in failed.value.result.history])
-    finally:
-        options.delValue("vec_mdot_use_gemv")
+    for _ in range(2):
+        scene = blocks_row_scene(4, 0.06, comm=comm)
+        with sc.System(squeezed_row(scene), solver="iterative") as system:
+            system.reset({"temperature": 300.0})
+            with pytest.raises(sc.NewtonConvergenceError) as failed:
+                sc.solve(system, rtol=1e-12, max_it=2, line_search="basic")
+            histories.append([step.residual for step in failed.value.result.history])
     assert len(histories[0]) == 3 and histories[0] == histories[1]
 
 
