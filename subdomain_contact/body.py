@@ -163,6 +163,10 @@ class Body:
         self.condensed = self.schur or self.columns
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None
+        #: MUMPS on the body's matrix where its Krylov solve failed, until the matrix changes.
+        self._direct: PETSc.KSP | None = None
+        #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`).
+        self.fallbacks = 0
         self._near_null: list[PETSc.Object] = []
         #: Krylov iterations of the body's iterative solves, summed.
         self.solve_iterations = 0
@@ -255,9 +259,9 @@ class Body:
         if self.factor is not None:
             self.factor.destroy()
         mats = [m for forms in self.block_matrices.values() for m in forms.values()]
-        destroy(self.ksp, self.A_bulk, self._A, self._scaled, self._kept_is, *mats, *self._vectors)
-        destroy(*self._near_null)
-        self.factor, self.ksp, self._A, self._near_null = None, None, None, []
+        destroy(self.ksp, self._direct, self.A_bulk, self._A, self._scaled, self._kept_is)
+        destroy(*mats, *self._vectors, *self._near_null)
+        self.factor, self.ksp, self._direct, self._A, self._near_null = None, None, None, None, []
 
     # -- assembly and factorisation ------------------------------------------------------
     def assemble(self) -> None:
@@ -480,6 +484,8 @@ class Body:
     def _factorise_whole(self) -> None:
         """``A`` as one sparse matrix, factorised by MUMPS (distributed), or its AMG set up."""
         self.whole_matrix()
+        destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
+        self._direct = None
         if self.ksp is None and self.iterative and len(self.forms.fields) > 1:
             options = dict(SPLIT)
             for name in self.forms.fields:
@@ -646,9 +652,19 @@ class Body:
         return y
 
     def _krylov(self, rhs: Vector, rtol: float | None = None) -> Vector:
-        """One Krylov solve (or solve by the factorisation) of ``A y = rhs``."""
+        """One Krylov solve (or solve by the factorisation) of ``A y = rhs``.
+
+        Where an iterative body's Krylov solve fails (GMRES + GAMG broke down, PETSc reason
+        -5, at a state far from the solution: the row of four 3D blocks at 1.01M DOFs, a
+        step that moved a field by 22 times its largest value), the body's matrix is
+        factorised by MUMPS (options under ``-<prefix>direct_``) and solves by it until the
+        matrix changes; the next matrix tries the Krylov solve again.
+        """
         b, x = self._vectors[0], self._vectors[1]
         b.array[:] = rhs
+        if self._direct is not None:
+            self._direct.solve(b, x)
+            return self._checked(self._direct, x)
         if rtol is not None:
             kept = self.ksp.getTolerances()[0]
             self.ksp.setTolerances(rtol=rtol)
@@ -659,11 +675,21 @@ class Body:
         self.solve_iterations += iterations if self.iterative else 0
         if reason < 0 and self.iterative:
             kind = f"{self.ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
-            raise RuntimeError(
-                f"body '{self.name}': {kind} stopped with PETSc reason {reason} after "
-                f"{iterations} iterations; solve it directly (-{self.prefix}solver direct, "
-                "or sc.System(problem, solver='direct'))"
+            what = (
+                f"body '{self.name}' ({kind} stopped with PETSc reason {reason} after "
+                f"{iterations} iterations; MUMPS instead)"
             )
+            self._direct = factorise(
+                self._A, self.prefix + "direct_", what, dim=self.dim, again=False
+            )
+            self.factorisations += 1
+            self.fallbacks += 1
+            return self._krylov(rhs)
+        return self._checked(self.ksp, x)
+
+    def _checked(self, ksp: PETSc.KSP, x: PETSc.Vec) -> Vector:
+        """The solution ``x`` of ``ksp``, or an error naming the body."""
+        reason = ksp.getConvergedReason()
         if reason < 0:
             raise RuntimeError(f"body '{self.name}': linear solve failed (reason {reason})")
         return x.array.copy()

@@ -298,3 +298,35 @@ def test_field_splits_partition_the_merged_rows_and_gmres_meets_each_fields_tole
     # the merged matrix and the blocks' product agree to round-off (1e-12 of ‖b_f‖ at most)
     for f in atol:
         assert reached[f] <= atol[f] + 1e-12 * norms[f], f
+
+
+def test_a_body_whose_krylov_solve_fails_is_factorised_instead(comm):
+    """A body whose GMRES + GAMG stops short (here: allowed 3 iterations, the floating block
+    1 of the row) is factorised by MUMPS for that Jacobian, and Newton goes on to the
+    monolithic solution, as the other bodies' Krylov solves go on."""
+    scene = blocks_row_scene(4, 0.05, comm=comm)
+    fields = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
+    with sc.System(squeezed_row(scene), solver="direct") as system:
+        system.reset({"temperature": 300.0})
+        sc.solve(system, sc.Monolithic(), rtol=1e-12)
+        references = [NodalReference(*field_values(system, f, c)) for f, c in fields]
+    options, key = PETSc.Options(), "sc_body_block_1_ksp_max_it"
+    options[key] = 3  # PETSc's global database: removed below, whatever happens
+    try:
+        with sc.System(squeezed_row(scene), solver="iterative") as system:
+            system.reset({"temperature": 300.0})
+            result = sc.solve(system, sc.Subdomains(), rtol=1e-12)
+            local = {name: b.fallbacks for name, b in system.bodies.items()}
+            fallbacks = {k: v for part in comm.allgather(local) for k, v in part.items()}
+            errors = [
+                error_against(system, ref.at(field_values(system, f, c)[0]), f, c)
+                for ref, (f, c) in zip(references, fields, strict=True)
+            ]
+    finally:
+        options.delValue(key)
+    # every Jacobian's body matrix changes (T, φ, u couple): its first solve fails, MUMPS
+    # solves it and the rest of that Newton step; the other bodies never fall back
+    assert fallbacks.pop("block_1") == result.jacobians
+    assert set(fallbacks.values()) == {0}
+    # as test_coupled_newton_with_iterative_bodies_equals_monolithic: both Newtons to 1e-12
+    assert max(errors) < 1e-11
