@@ -171,6 +171,8 @@ for size in args.sizes:
             f"| {'—' if mono is None else f'{difference:.1e}'} |",
             flush=True,
         )
+        if sub.fallbacks:
+            print(f"bodies factorised where their Krylov solve failed: {sub.fallbacks}")
         if args.history:
             print(f"subdomain Newton:\n{sub.table()}", flush=True)
             if mono is not None:

@@ -106,6 +106,8 @@ class Result:
         jacobians: Jacobians assembled (and handed to the linear solver's ``setup``).
         line_search: The line search that converged.
         shortened: Newton steps that the ``"limited"`` line search shortened.
+        fallbacks: Bodies' matrices whose Krylov solve failed and that MUMPS factorised
+            instead (among the factorisations).
     """
 
     history: list[NewtonStep] = field(default_factory=list)
@@ -117,6 +119,7 @@ class Result:
     jacobians: int = 0
     line_search: str = ""
     shortened: int = 0
+    fallbacks: int = 0
 
     @property
     def iterations(self) -> int:
@@ -362,11 +365,13 @@ class _Callbacks:
 
     def _print(self, step: NewtonStep, relative: float) -> None:
         """One progress line (rank 0): the iterate, its residual relative to the scale."""
+        fallbacks = _fallbacks(self.system)  # collective
         if self.system.comm.rank == 0:
             print(
                 f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
                 f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}"
                 + (f", halvings {step.halvings}" if step.halvings else "")
+                + (f", bodies factorised (Krylov failed) {fallbacks}" if fallbacks else "")
                 + f", {time.perf_counter() - self.start:.0f} s",
                 flush=True,
             )
@@ -523,7 +528,8 @@ def solve(
         monitor: Called with the iteration number at every iterate, the system holding it
             (its time is the caller's to exclude).
         progress: Print a line per iterate on rank 0 (line search, residual relative to the
-            scale, inner rounds, step, seconds since the attempt began), and why an attempt
+            scale, inner rounds, step, the bodies' matrices factorised so far where their
+            Krylov solve failed, seconds since the attempt began), and why an attempt
             failed before the next one starts: for long runs.
 
     Raises:
@@ -537,7 +543,7 @@ def solve(
     linear = linear or Subdomains()
     linear.check(system)
     system.check_laws("at the initial state")
-    made = _factorisations(system, linear)
+    made, fallen = _factorisations(system, linear), _fallbacks(system)
     initial = system.state()
     failures = []
     try:
@@ -566,6 +572,7 @@ def solve(
     result.line_search = attempt
     result.seconds = time.perf_counter() - start
     result.factorisations = _factorisations(system, linear) - made
+    result.fallbacks = _fallbacks(system) - fallen
     return result
 
 
@@ -573,6 +580,12 @@ def _factorisations(system: System, linear) -> int:
     """Sparse factorisations made so far: each body's once, and the linear solver's own."""
     local = sum(b.factorisations for b in system.bodies.values() if b.comm.rank == 0)
     return int(system.comm.allreduce(local)) + getattr(linear, "factorisations", 0)
+
+
+def _fallbacks(system: System) -> int:
+    """Bodies' matrices factorised so far where their Krylov solve failed."""
+    local = sum(b.fallbacks for b in system.bodies.values() if b.comm.rank == 0)
+    return int(system.comm.allreduce(local))
 
 
 def _newton(
