@@ -298,8 +298,8 @@ class _Callbacks:
             landed = max(self.ratios(self.system.field_norms(f)), default=0.0)
             if np.isfinite(landed) and landed <= bound:
                 return
-            if halvings == 1 and full <= PROPORTIONAL * landed:  # a penalty's new status
-                y.scale(2.0)
+            if halvings == 1 and np.isfinite(landed) and full <= PROPORTIONAL * landed:
+                y.scale(2.0)  # a penalty's new status: the full step
                 self.pending_halvings -= 1
                 x.copy(w)
                 w.axpy(-1.0, y)

@@ -131,8 +131,10 @@ class _Landing:
         (lambda x: 1e4 * x**2, 40.0, None),  # 1.6e7, 4e6: ln(R/1e3) falls to 0.86 of it, a climb
         # 4e5, 2e5: proportional to the step, a penalty's new contact status: the full step
         (lambda x: 1e4 * np.abs(x), 40.0, 0),
+        # two norms beyond measure are not a proportional landing: e^10, e^5 = 148 is in
+        (lambda x: np.where(np.abs(x) > 10, np.inf, np.exp(np.abs(x))), 40.0, 3),
     ],
-    ids=["exponential", "overflow", "power", "penalty"],
+    ids=["exponential", "overflow", "power", "penalty", "infinite"],
 )
 def test_a_step_is_halved_while_its_landing_falls_as_an_exponentials(law, overshoot, halvings):
     """The safeguard halves an exponential's overshoot, however far (the bound HALVINGS is
