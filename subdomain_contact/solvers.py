@@ -26,8 +26,9 @@ AMD_ROWS = 100_000
 # PETSc's own unrolled kernel rounds the same way wherever the vectors lie: the row of four
 # 3D blocks at 11k DOFs repeats its Newton residuals bit for bit (three runs, serial and on 2
 # ranks; with gemv two runs differed), no slower (31k DOFs: 24.3 s against 29.3 s). At 1.01M
-# DOFs on 2 ranks another source remains (two runs parted at step 4). Read when a vector is
-# created; a user's own ``-vec_mdot_use_gemv`` is kept.
+# DOFs on 2 ranks another source remains (two runs parted at step 4; the suspect, MUMPS on a
+# strip that spans ranks: README). Read when a vector is created; a user's own
+# ``-vec_mdot_use_gemv`` is kept.
 if not PETSc.Options().hasName("vec_mdot_use_gemv"):
     PETSc.Options().setValue("vec_mdot_use_gemv", False)
 
