@@ -576,16 +576,23 @@ def solve(
     return result
 
 
+def _bodies_total(system: System, count: str) -> int:
+    """A body counter (``"factorisations"``, ``"fallbacks"``) summed over the bodies.
+
+    Each body counts once, however many ranks share it (collective).
+    """
+    local = sum(getattr(b, count) for b in system.bodies.values() if b.comm.rank == 0)
+    return int(system.comm.allreduce(local))
+
+
 def _factorisations(system: System, linear) -> int:
     """Sparse factorisations made so far: each body's once, and the linear solver's own."""
-    local = sum(b.factorisations for b in system.bodies.values() if b.comm.rank == 0)
-    return int(system.comm.allreduce(local)) + getattr(linear, "factorisations", 0)
+    return _bodies_total(system, "factorisations") + getattr(linear, "factorisations", 0)
 
 
 def _fallbacks(system: System) -> int:
-    """Bodies' matrices factorised so far where their Krylov solve failed."""
-    local = sum(b.fallbacks for b in system.bodies.values() if b.comm.rank == 0)
-    return int(system.comm.allreduce(local))
+    """Bodies' matrices factorised so far where their Krylov solve failed (collective)."""
+    return _bodies_total(system, "fallbacks")
 
 
 def _newton(
