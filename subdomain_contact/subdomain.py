@@ -112,9 +112,9 @@ BODY_RTOL_FACTOR = 1e-2
 RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 
 #: The largest weight of a master's residual (:meth:`Subdomains._error_weights`): an open
-#: contact's tie, 1e-9 of the contact's stiffness, weighs up to about 1e9 more than its
-#: neighbours; a master with no link at all (nothing ties it) is not to be solved to
-#: round-off of nothing.
+#: contact's tie, 1e-9 of the contact's stiffness, weighs up to about 1e10 more than its
+#: neighbours (measured on the collector bar slot); a still weaker link is not to push its
+#: master's target below round-off.
 MAX_ERROR_WEIGHT = 1e12
 
 #: A kept (lagged) preconditioner is rebuilt after a solve that needed more than this many
@@ -187,6 +187,7 @@ class Subdomains:
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
         self._body_rtol = BODY_RTOL_FACTOR * Tolerance().rtol
+        self.error_weights: dict[str, Vector] | None = None  # set by setup
         self.system: System | None = None
         self.strip: StripSolve | None = None  # the sparse strip corrector's operator
         self._freed_factorisations = 0
@@ -247,7 +248,8 @@ class Subdomains:
         iterative = system.comm.allreduce(
             any(b.iterative for b in system.bodies.values()), op=MPI.LOR
         )
-        self.error_weights = self._error_weights() if self.use_krylov else None
+        weigh = self.use_krylov and iterative and not system.symmetric
+        self.error_weights = self._error_weights() if weigh else None
         lag = self.lag and self.use_krylov and iterative  # its build costs Krylov body solves
         self._lagged = lag and kept and not self._built["stale"]
         if not self._lagged:
@@ -267,17 +269,15 @@ class Subdomains:
         that its error, not its residual, meets the tolerance (the collector bar slot with
         an iterative block: docs/iterative_bodies.md).
 
-        None where every body is factorised: the interface Krylov then meets the forcing of
-        1e-8 (``newton.FORCING``), which holds the path, and a floating body held by ties
-        alone at a cold start (the row of four 3D blocks of the tests) makes the weighed
-        target unreachable in round-off. None for a symmetric problem: CG takes one weight
-        for every DOF, which this would make 1e9 times too tight for the others.
+        Not used where every body is factorised (:meth:`setup`): the interface Krylov then
+        meets the forcing of 1e-8 (``newton.FORCING``), which holds the path, and a floating
+        body held by ties alone at a cold start (the row of four 3D blocks of the tests)
+        makes the weighed target unreachable in round-off. Nor for a symmetric problem: CG
+        takes one weight for every DOF, which this would make 1e9 times too tight for the
+        others. None without a displacement.
         """
         system = self.system
-        if system.symmetric or "displacement" not in system.problem.fields:
-            return None
-        iterative = any(b.iterative for b in system.bodies.values())
-        if not system.comm.allreduce(iterative, op=MPI.LOR):
+        if "displacement" not in system.problem.fields:
             return None
         bulk = {k: np.zeros(n) for k, n in system.sizes.items()}
         series = {k: np.zeros(n) for k, n in system.sizes.items()}
