@@ -405,7 +405,7 @@ class Body:
         bulk's is the largest row sum on the slave's field (:meth:`_bulk_norms_by_field`).
         """
         position, layer, L = self.position[k], self.layers[k], self.blocks[k]["L"]
-        link = np.abs(L).sum(axis=1).A1[position]
+        link = self._link_rows(k)[position]
         nodes = layer.nodes
         u = [c for c, (f, _) in enumerate(layer.channels) if f == "displacement"]
         if u:
@@ -422,6 +422,10 @@ class Body:
                 link[c * nodes : (c + 1) * nodes] = np.maximum(smallest, 0.0)
         return link, self._bulk_norms[self._kept_field[position]]
 
+    def _link_rows(self, k: str) -> Vector:
+        """Row sums of ``|L_k|`` on the contact DOFs: the half-link's stiffness [W/K, S, N/m]."""
+        return np.abs(self.blocks[k]["L"]).sum(axis=1).A1
+
     def _soft_or_fixed(self) -> dict[str, npt.NDArray[np.bool_]]:
         """Per master DOF of each interface: take the link form (soft link or fixed slave).
 
@@ -431,7 +435,7 @@ class Body:
         """
         out = {}
         for k, position in self.position.items():
-            link_rows = np.abs(self.blocks[k]["L"]).sum(axis=1).A1
+            link_rows = self._link_rows(k)
             fields = self._kept_field[position]
             soft = np.zeros(len(position), dtype=bool)
             for f, bulk in enumerate(self._bulk_norms):

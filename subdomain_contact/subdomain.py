@@ -249,13 +249,14 @@ class Subdomains:
             any(b.iterative for b in system.bodies.values()), op=MPI.LOR
         )
         weigh = self.use_krylov and iterative and not system.symmetric
+        weigh = weigh and "displacement" in system.problem.fields
         self.error_weights = self._error_weights() if weigh else None
         lag = self.lag and self.use_krylov and iterative  # its build costs Krylov body solves
         self._lagged = lag and kept and not self._built["stale"]
         if not self._lagged:
             self._build_preconditioner()
 
-    def _error_weights(self) -> dict[str, Vector] | None:
+    def _error_weights(self) -> dict[str, Vector]:
         """Per master DOF of a displacement: ``Σ_α K_α / Σ_α S_α`` (≥ 1), else 1.
 
         ``S_α = (1/l_α + 1/K_α)⁻¹`` is the series law of the half-link ``l_α`` and the body
@@ -274,11 +275,9 @@ class Subdomains:
         body held by ties alone at a cold start (the row of four 3D blocks of the tests)
         makes the weighed target unreachable in round-off. Nor for a symmetric problem: CG
         takes one weight for every DOF, which this would make 1e9 times too tight for the
-        others. None without a displacement.
+        others, nor without a displacement.
         """
         system = self.system
-        if "displacement" not in system.problem.fields:
-            return None
         bulk = {k: np.zeros(n) for k, n in system.sizes.items()}
         series = {k: np.zeros(n) for k, n in system.sizes.items()}
 
@@ -406,18 +405,9 @@ class Subdomains:
         return np.linalg.norm(np.reshape(r, (len(layer.channels), layer.nodes)), axis=1)
 
     def _measure(
-        self,
-        residual: dict[str, Vector],
-        scales: dict[str, Vector],
-        tolerance: Tolerance,
-        weights: dict[str, Vector] | None = None,
+        self, residual: dict[str, Vector], scales: dict[str, Vector], tolerance: Tolerance
     ) -> tuple[float, bool]:
-        """Largest residual relative to its channel's scale; and whether it is small enough.
-
-        ``weights``: each master DOF's residual weighed first (:meth:`_error_weights`).
-        """
-        if weights is not None:
-            residual = {k: weights[k] * r for k, r in residual.items()}
+        """Largest residual relative to its channel's scale; and whether it is small enough."""
         relative = 0.0
         for k, r in residual.items():
             norms = self._channel_norms(k, r)
@@ -426,6 +416,12 @@ class Subdomains:
             return relative, relative <= tolerance.rtol
         norms = self.system.master_field_norms(residual)
         return relative, all(norms[f] <= tolerance.atol[f] for f in norms)
+
+    def _weighed(self, residual: dict[str, Vector]) -> dict[str, Vector]:
+        """Each master's residual times its error weight, if any (:meth:`_error_weights`)."""
+        if self.error_weights is None:
+            return residual
+        return {k: self.error_weights[k] * r for k, r in residual.items()}
 
     # -- solve ------------------------------------------------------------------------------
     def solve(self, b: Vector | None, tolerance: Tolerance) -> tuple[Vector, InterfaceResult]:
@@ -620,7 +616,8 @@ class Subdomains:
             self._tighten()
             y, residual, pushed = self._round(b, increments)
             scales = scales or self._flux_scales(pushed)
-            relative, small = self._measure(residual, scales, tolerance, self.error_weights)
+            measured = self._weighed(residual)
+            relative, small = self._measure(measured, scales, tolerance)
             result.rounds, result.converged = result.rounds + 1, small
             result.history.append(relative)
             if small:
@@ -643,10 +640,8 @@ class Subdomains:
             for k, s in self.slices.items():
                 increments[k] = increments[k] + delta[s]
         result.applications = self._applications
-        if self.error_weights is not None:  # as the test weighed them
-            residual = {k: self.error_weights[k] * r for k, r in residual.items()}
         reached = (
-            f" (reached: {_describe(Tolerance(atol=system.master_field_norms(residual)))}"
+            f" (reached: {_describe(Tolerance(atol=system.master_field_norms(measured)))}"
             + (", each master's residual weighed by its error" if self.error_weights else "")
             + ")"
             if tolerance.atol is not None
