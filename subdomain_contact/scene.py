@@ -160,7 +160,7 @@ def load_scene(
     interfaces: Sequence[str],
     parameters: Mapping[str, float] | None = None,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """Mesh a ``.geo`` file and split it into bodies and master layers.
 
@@ -175,7 +175,9 @@ def load_scene(
             per group when there are enough ranks, in proportion to their cells; several
             bodies per rank otherwise). Every rank meshes the file and keeps the master
             layers; a group distributes only its own bodies. ``"auto"`` (default):
-            ``"groups"`` with several bodies on several ranks, else ``"shared"``.
+            ``"groups"`` with several bodies on several ranks, else ``"shared"``. A scene
+            of the same bodies (on ``comm``): its rank groups, so that a state interpolates
+            between the two (a coarser mesh of a nested iteration, ``System.interpolate``).
 
     Raises:
         ValueError: Unknown parameter, missing or overlapping group, empty or
@@ -183,7 +185,10 @@ def load_scene(
             them, or a file gmsh cannot mesh; the message names the file and the group.
     """
     path = Path(path)
-    if placement == "auto":
+    like = placement if isinstance(placement, Scene) else None
+    if like is not None:
+        placement = "shared" if like.shared else "groups"
+    elif placement == "auto":
         placement = "groups" if len(bodies) > 1 else "shared"
     if placement == "groups" and comm.size > 1:
         return _grouped(
@@ -195,6 +200,7 @@ def load_scene(
                 comm=MPI.COMM_SELF,
             ),
             comm,
+            like,
         )
     if placement not in ("shared", "groups"):
         raise ValueError(f"placement = {placement!r}: use 'auto', 'shared' or 'groups'")
@@ -230,13 +236,20 @@ def load_scene(
     return Scene(path, comm, scene_bodies, scene_interfaces, owner, 0, comm, (0,))
 
 
-def _grouped(serial: Scene, comm: MPI.Comm) -> Scene:
-    """Place the bodies of a serial scene (on every rank) on rank groups of ``comm``."""
-    cells = {
-        n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
-        for n, b in serial.bodies.items()
-    }
-    owner, group_of_rank = _place(cells, _work(serial), comm.size)
+def _grouped(serial: Scene, comm: MPI.Comm, like: Scene | None = None) -> Scene:
+    """Place the bodies of a serial scene (on every rank) on ``like``'s rank groups, or new."""
+    if like is not None:
+        if set(like.owner) != set(serial.bodies):
+            raise ValueError(
+                f"{serial.source}: placed like a scene of other bodies ({sorted(like.owner)})"
+            )
+        owner, group_of_rank = dict(like.owner), comm.allgather(like.group)
+    else:
+        cells = {
+            n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
+            for n, b in serial.bodies.items()
+        }
+        owner, group_of_rank = _place(cells, _work(serial), comm.size)
     group = group_of_rank[comm.rank]
     group_comm = comm.Split(group, comm.rank)
     roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))

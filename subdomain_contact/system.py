@@ -16,6 +16,7 @@ from __future__ import annotations
 import gc
 from collections.abc import Mapping
 
+import dolfinx
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -300,6 +301,72 @@ class System:
             values = [initial.get(f, 0.0) for f, _ in layer.channels]
             masters[k] = np.repeat(values, layer.nodes).astype(float) * self.active[k]
         self.set_masters(masters)
+
+    def interpolate(self, other: System) -> None:
+        """Take the state of ``other``, the same problem on another mesh of the same geometry.
+
+        Each body's fields are interpolated from ``other``'s body of the same name (dolfinx's
+        non-matching interpolation), each master value is the mean of its two bodies' traces
+        (where two half-links of equal stiffness balance). The initial guess of a nested
+        iteration: solved on a coarse mesh from a cold start, a problem starts its fine-mesh
+        Newton near the solution (collective on both systems).
+
+        Raises:
+            ValueError: ``other``'s bodies are placed on other rank groups than this
+                system's (load one scene with ``placement=`` the other), or a node of
+                a body lies outside ``other``'s mesh of it by more than its largest cell.
+        """
+        mine, theirs = self.problem.scene, other.problem.scene
+        if dict(mine.owner) != dict(theirs.owner) or mine.group_roots != theirs.group_roots:
+            raise ValueError(
+                f"{mine.source}: interpolating from a system whose bodies lie on other rank "
+                f"groups (body -> group {dict(theirs.owner)}, here {dict(mine.owner)}): load "
+                "one scene with the other as its placement (load_scene(..., placement=scene))"
+            )
+        found, lost = {}, {}  # body -> the fine interpolation points in the coarse mesh
+        for name, body in self.bodies.items():
+            mesh = other.bodies[name].U.function_space.mesh
+            tdim = mesh.topology.dim
+            own = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+            reach = body.comm.allreduce(float(mesh.h(tdim, own).max(initial=0.0)), op=MPI.MAX)
+            cells = np.arange(
+                body.U.function_space.mesh.topology.index_map(tdim).size_local, dtype=np.int32
+            )
+            # every field is P1: the interpolation points of one serve all. Padded by
+            # round-off first (a padding of the largest cell made the search 30 times as long
+            # as the rest at 66k DOFs); by that cell where nodes on a curved face are missed
+            V, V0 = (
+                b.forms.collapsed(self.problem.fields[0])[0] for b in (body, other.bodies[name])
+            )
+            for padding in (1e-6 * reach, reach):
+                data = dolfinx.fem.create_interpolation_data(V, V0, cells, padding)
+                outside = (np.asarray(data.src_owner) < 0).sum()
+                if not body.comm.allreduce(int(outside)):
+                    break
+            found[name] = cells, data
+            lost[name] = (body.comm.allreduce(int(outside)), reach)
+        for name, (count, reach) in self._everywhere(lost).items():
+            if count:  # refused on every rank alike
+                raise ValueError(
+                    f"{mine.source}: {count} nodes of body '{name}' lie farther than "
+                    f"{reach:.3g} m (its largest cell) outside the other mesh of it"
+                )
+        for name, body in self.bodies.items():
+            source, (cells, data) = other.bodies[name], found[name]
+            for field in self.problem.fields:
+                V, dofs = body.forms.collapsed(field)
+                V0, dofs0 = source.forms.collapsed(field)
+                given, taken = dolfinx.fem.Function(V0), dolfinx.fem.Function(V)
+                given.x.array[:] = source.U.x.array[dofs0]
+                taken.interpolate_nonmatching(given, cells, data)
+                taken.x.scatter_forward()
+                body.U.x.array[dofs] = taken.x.array
+        local = {k: np.zeros(n) for k, n in self.sizes.items()}
+        for body in self.bodies.values():
+            for k, slaves in body.slaves.items():
+                local[k] += slaves.gather(body.U.x.array, self.sizes[k], body.comm)
+        traces = self.total(local)
+        self.set_masters({k: 0.5 * traces[k] * self.active[k] for k in self.layers})
 
     def set_masters(self, masters: Mapping[str, Vector]) -> None:
         """Take the master values (interface -> replicated vector; kept, not copied)."""

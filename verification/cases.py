@@ -77,7 +77,7 @@ def two_plates_scene(
     length: float = 1.0,
     height: float = 1.0,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """``geo/two_plates.geo``: ``layers`` element layers per plate, ``rows`` along y.
 
@@ -141,7 +141,7 @@ def stack_scene(
     rows: int = 2,
     *,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """``geo/stack.geo``: ``bodies`` unit squares in a chain, ``layers`` × ``rows`` cells each."""
     return load_scene(
@@ -207,7 +207,7 @@ def bars_scene(
     rows: int = 2,
     *,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """``geo/two_plates.geo`` as two bars of 0.5 m × 0.1 m (``layers`` × ``rows`` quads each)."""
     return two_plates_scene(layers, rows, length=0.5, height=0.1, comm=comm, placement=placement)
@@ -397,7 +397,7 @@ def cathode_slot_scene(
     *,
     depth: float = 0.0,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """``geo/cathode_slot.geo``: block, cast iron and bar; 2D, or a 3D slice of ``depth`` [m]."""
     return load_scene(
@@ -514,7 +514,7 @@ def blocks_row_scene(
     size: float = 0.1,
     *,
     comm: MPI.Comm = MPI.COMM_WORLD,
-    placement: str = "auto",
+    placement: str | Scene = "auto",
 ) -> Scene:
     """``geo/blocks_row3d.geo``: ``count`` blocks of 0.5 × 0.2 × 0.2 m in a row, tetrahedra."""
     return load_scene(
