@@ -31,6 +31,9 @@
 # the bar current entering through the top, φ = 0 at the bar's end; symmetry on x = 0 and
 # y = 0, the block and the cast iron resting on z = 0.
 #
+# Each solve is a nested iteration: from a cold start (a uniform 300 K) on a mesh 2 (or 4)
+# times coarser, then on each finer mesh from the solution before it (`--levels`).
+#
 # Run `python demos/demo_collector_bar_slot.py` (`--small` for the tests, `--size` and
 # `--fine` for the mesh). Output in `out_collector_bar_slot/`: `report.json`, VTK per run
 # (with the contact fields), `slot_faces.png` (current density and pressure on the slot's
