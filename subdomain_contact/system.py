@@ -340,11 +340,10 @@ class System:
             )
             for padding in (1e-6 * reach, reach):
                 data = dolfinx.fem.create_interpolation_data(V, V0, cells, padding)
-                outside = (np.asarray(data.src_owner) < 0).sum()
-                if not body.comm.allreduce(int(outside)):
+                outside = body.comm.allreduce(int((np.asarray(data.src_owner) < 0).sum()))
+                if not outside:
                     break
-            found[name] = cells, data
-            lost[name] = (body.comm.allreduce(int(outside)), reach)
+            found[name], lost[name] = (cells, data), (outside, reach)
         for name, (count, reach) in self._everywhere(lost).items():
             if count:  # refused on every rank alike
                 raise ValueError(
