@@ -187,6 +187,11 @@ def load_scene(
     path = Path(path)
     like = placement if isinstance(placement, Scene) else None
     if like is not None:
+        if set(like.owner) != set(bodies):
+            raise ValueError(
+                f"{path}: placed like a scene of other bodies ({sorted(like.owner)}, "
+                f"not {sorted(bodies)})"
+            )
         placement = "shared" if like.shared else "groups"
     elif placement == "auto":
         placement = "groups" if len(bodies) > 1 else "shared"
@@ -239,10 +244,6 @@ def load_scene(
 def _grouped(serial: Scene, comm: MPI.Comm, like: Scene | None = None) -> Scene:
     """Place the bodies of a serial scene (on every rank) on ``like``'s rank groups, or new."""
     if like is not None:
-        if set(like.owner) != set(serial.bodies):
-            raise ValueError(
-                f"{serial.source}: placed like a scene of other bodies ({sorted(like.owner)})"
-            )
         owner, group_of_rank = dict(like.owner), comm.allgather(like.group)
     else:
         cells = {

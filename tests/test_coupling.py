@@ -487,12 +487,14 @@ def test_the_solution_of_a_coarse_mesh_starts_newton_near_the_fine_one(comm):
 
 def test_a_mesh_of_another_geometry_or_placement_is_refused(comm):
     """Nodes outside the other mesh by more than its largest cell: no silent extrapolation.
-    Under mpiexec, bodies on other rank groups: no interpolation across groups."""
+    A scene placed like one of other bodies; under mpiexec, bodies on other rank groups."""
     short = two_plates_scene(2, 2, comm=comm)
     long = two_plates_scene(2, 2, length=2.0, comm=comm, placement=short)
     given = make_system(two_plates(short, h=1.0).problem)
     with pytest.raises(ValueError, match=r"plate_A.*outside the other mesh"):
         make_system(two_plates(long, h=1.0).problem).interpolate(given)
+    with pytest.raises(ValueError, match=r"placed like a scene of other bodies"):
+        cathode_slot_scene(0.06, 0.03, comm=comm, placement=short)
     if comm.size > 1:  # the plates on a rank group each, and both on every rank
         shared = make_system(
             two_plates(two_plates_scene(2, 2, comm=comm, placement="shared"), h=1.0).problem
