@@ -80,7 +80,8 @@ parser.add_argument(
 parser.add_argument(
     "--levels",
     type=int,
-    help="meshes of the nested iteration, each 2 times finer (default 2 at --small, else 3)",
+    help="meshes of the nested iteration, each 2 times finer (default 2 at --small, else 3, "
+    "which the mesh study needs; 1: the cold start on the run's mesh)",
 )
 parser.add_argument("--out", type=Path, default=Path("out_collector_bar_slot"))
 args = parser.parse_args()
@@ -238,17 +239,17 @@ def stats(values: np.ndarray, area: np.ndarray) -> dict:
 
 # ## Runs
 #
-# Each setup by Newton from a cold start, a uniform temperature of 300 K, with the default
-# settings: the subdomain iteration inside, then the monolithic Newton on the same discrete
-# problem, each by nested iteration: Newton on a mesh 2^(levels-1) times coarser from the cold
-# state (a uniform 300 K), then on each finer mesh from the solution before it, interpolated
-# (`System.interpolate`). From the cold state full steps diverge on both routes, the iterates
-# heating without bound, and Newton's steps are limited to 100 K of temperature change
-# (`sc.newton.MAX_TEMPERATURE_STEP`): that climb, ten steps, is paid on the coarsest mesh
-# alone. Measured, one rank, 65,900 DOFs from 300 K: 18 Newton steps, 300 s; from the
-# solution on the mesh 2 times coarser (17,335 DOFs, 18 steps, 22 s): 8 full steps, 68 s;
-# from the mesh 4 times coarser (5,595 DOFs) full steps failed and the limited ones took 11.
-# Then the design variant, a bar of 174 mm (2 mm of cast iron above it) in the same slot.
+# Each setup by Newton with the default settings: the subdomain iteration inside, then the
+# monolithic Newton on the same discrete problem, each by nested iteration: Newton on a mesh
+# 2^(levels-1) times coarser from the cold state (a uniform 300 K), then on each finer mesh
+# from the solution before it, interpolated (`System.interpolate`). From the cold state full
+# steps diverge on both routes, the iterates heating without bound, and Newton's steps are
+# limited to 100 K of temperature change (`sc.newton.MAX_TEMPERATURE_STEP`): that climb, ten
+# steps, is paid on the coarsest mesh alone. Measured, one rank, 65,900 DOFs from 300 K: 18
+# Newton steps, 300 s; from the solution on the mesh 2 times coarser (17,335 DOFs, 18 steps,
+# 22 s): 8 full steps, 68 s; from the mesh 4 times coarser (5,595 DOFs) full steps failed and
+# the limited ones took 11. Then the design variant, a bar of 174 mm (2 mm of cast iron above
+# it) in the same slot.
 START = 300.0  # K, the uniform initial temperature of the coarsest mesh
 LEVELS = args.levels or (2 if args.small else 3)
 if not (args.small or args.no_study):
