@@ -245,11 +245,11 @@ def stats(values: np.ndarray, area: np.ndarray) -> dict:
 # from the solution before it, interpolated (`System.interpolate`). From the cold state full
 # steps diverge on both routes, the iterates heating without bound, and Newton's steps are
 # limited to 100 K of temperature change (`sc.newton.MAX_TEMPERATURE_STEP`): that climb, ten
-# steps, is paid on the coarsest mesh alone. Measured, one rank, 65,900 DOFs from 300 K: 18
-# Newton steps, 300 s; from the solution on the mesh 2 times coarser (17,335 DOFs, 18 steps,
-# 22 s): 8 full steps, 68 s; from the mesh 4 times coarser (5,595 DOFs) full steps failed and
-# the limited ones took 11. Then the design variant, a bar of 174 mm (2 mm of cast iron above
-# it) in the same slot.
+# steps, is paid on the coarsest mesh alone. Measured, one rank, 65,900 DOFs, the subdomain
+# Newton: from 300 K 18 steps, 178 s; nested from 5,595 and 17,335 DOFs, 8 full steps on the
+# run's mesh, 82 s in all (benchmarks/bench_nested_slot.py); from the mesh 4 times coarser
+# straight, full steps failed and the limited ones took 11. Then the design variant, a bar of
+# 174 mm (2 mm of cast iron above it) in the same slot.
 START = 300.0  # K, the uniform initial temperature of the coarsest mesh
 LEVELS = args.levels or (2 if args.small else 3)
 if not (args.small or args.no_study):
