@@ -382,7 +382,14 @@ def test_coupled_rank_groups_equal_serial(comm):
     serial.reset({"temperature": 300.0})
     expected = sc.solve(serial, rtol=1e-12)
     assert result.iterations == expected.iterations
-    assert [s.inner_rounds for s in result.history] == [s.inner_rounds for s in expected.history]
+    # A round ends where the interface Krylov meets its own tolerance, by a factor that its
+    # iterates set, and they differ in round-off between the two orders of summation: a
+    # step's last round can land on either side of the step's threshold (step 9, measured on
+    # one machine: 1.2e-9 grouped, 3.6e-9 serial, one round more; equal on the one before),
+    # so a step's rounds may differ by one; the Newton path must not.
+    pairs = zip(result.history, expected.history, strict=True)
+    rounds = [(s.inner_rounds, t.inner_rounds) for s, t in pairs]
+    assert all(abs(a - b) <= 1 for a, b in rounds), rounds
     worst = 0.0
     for field, component in FIELDS_3D:
         reference = NodalReference(*field_values(serial, field, component))
