@@ -457,8 +457,9 @@ def test_a_state_linear_in_space_is_interpolated_exactly(comm):
     for k, layer in fine.layers.items():
         for c, (field, component) in enumerate(layer.channels):
             values = np.atleast_2d(_linear_field(field, layer.coordinates).T)[component or 0]
-            expected = values * fine.active[k][c * layer.nodes]
-            given = fine.masters[k][c * layer.nodes : (c + 1) * layer.nodes]
+            channel = slice(c * layer.nodes, (c + 1) * layer.nodes)
+            expected = values * fine.active[k][channel]
+            given = fine.masters[k][channel]
             # the mean of two such traces: the same round-off, relative to the channel
             assert np.abs(given - expected).max() <= 1e-12 * np.abs(values).max(), (k, c)
 
