@@ -64,7 +64,7 @@ def pytest_assertion_pass(item, lineno, orig, expl):
     path = os.environ.get("SC_ASSERTIONS")
     if path:
         # one write with O_APPEND: whole records when two test workers share a rank's file
-        fd = os.open(f"{path}.{MPI.COMM_WORLD.rank}", os.O_WRONLY | os.O_APPEND | os.O_CREAT)
+        fd = os.open(f"{path}.{MPI.COMM_WORLD.rank}", os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         try:
             os.write(fd, f"@@ {item.nodeid}:{lineno}: {orig}\n{expl}\n".encode())
         finally:
