@@ -345,7 +345,7 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm, capsys):
             # the run's mesh from the coarse mesh's solution, interpolated: the climb is done,
             # Newton's own convergence and the contacts' search for their status are left, in
             # full steps (measured 10 and 10 steps at 160 mm, 7 and 8 at 174 mm; from the cold
-            # start 18 and 25 at 160 mm on this mesh, 17 and 40 on the coarse one)
+            # start 18 and 25 at 160 mm on this mesh, 17 and 30–40 on the coarse one)
             assert finest["newton_iterations"] == run["newton_iterations"], key
             assert finest["line_search"] == "basic", key
             assert finest["newton_iterations"] < coarse["newton_iterations"], key
