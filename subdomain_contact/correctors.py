@@ -29,7 +29,12 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, merged_matrix, same_pattern
-from subdomain_contact.solvers import destroy, factorise
+from subdomain_contact.solvers import (
+    REFACTORISATION_MARGIN,
+    destroy,
+    factorise,
+    refactorisation_memory,
+)
 from subdomain_contact.system import System
 
 __all__ = [
@@ -233,6 +238,8 @@ class StripSolve:
                 picked.append(np.arange(first, first + self.masters))
             indices = np.sort(np.concatenate(picked)).astype(PETSc.IntType)
             self.rows = PETSc.IS().createGeneral(indices, comm=self.comm)
+        if self.ksp is not None:
+            self._refuse_what_would_not_fit()
         whole = merged_matrix(system)
         K = whole.createSubMatrix(self.rows, self.rows)
         whole.destroy()
@@ -248,6 +255,28 @@ class StripSolve:
             self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
         )
         self.factorisations += 1
+
+    def fits(self) -> bool:
+        """Whether factorising the strip again fits in the memory its nodes have left."""
+        need, available = refactorisation_memory(self.ksp, self.comm)
+        return available is None or need <= available
+
+    def _refuse_what_would_not_fit(self) -> None:
+        """A clear error where factorising again would exhaust a node's memory.
+
+        The operating system would otherwise kill a rank (the collector bar slot at 1.14M
+        DOFs, 2 ranks on 23.5 GB: the strip's second factorisation, 2026-11-27).
+        """
+        need, available = refactorisation_memory(self.ksp, self.comm)
+        if available is not None and need > available:
+            raise MemoryError(
+                f"sparse strip corrector: factorising the strip ({self.K.getSize()[0]} rows) "
+                f"again needs about {need / 1e9:.3g} GB on a node (MUMPS INFO(22) of its last "
+                f"factorisation, times {REFACTORISATION_MARGIN}) where {available / 1e9:.3g} "
+                "GB is available. Try block low-rank factors (-sc_strip_mat_mumps_icntl_35 2 "
+                "-sc_strip_mat_mumps_cntl_7 1e-5), fewer ranks per node, or a narrower strip "
+                "(SparseStrip(layers=..., share=...))"
+            )
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """``G r`` for concatenated master residuals r (replicated; the result too)."""

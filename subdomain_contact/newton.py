@@ -654,6 +654,8 @@ def _newton(
         obj.destroy()
     if isinstance(cause, ValueError) and result.iterations == 0:
         raise cause  # at the initial state: bad input, not a failure to converge
+    if isinstance(cause, MemoryError):
+        raise cause  # another line search or time step would need the same memory
     # later, an iterate far from the solution (e.g. a contact law's exponential overshooting
     # into a singular interface operator): a failure to converge, which a line search or a
     # shorter time step may avoid

@@ -147,7 +147,10 @@ class Subdomains:
             cost iterative body solves) from one set-up to the next (Newton steps, time
             steps) while it serves: it is rebuilt when the active master DOFs change, and
             at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
-            iterations of the first solve after its build. It only preconditions: the true
+            iterations of the first solve after its build, unless its strip's new
+            factorisation would not fit in the memory left (kept then, and counted in
+            ``kept_for_memory``; where a rebuild is needed, a ``MemoryError`` says so before
+            the system kills a rank). It only preconditions: the true
             rounds use the current bodies. With factorised bodies the rebuild costs less
             than the rounds and iterations a kept one adds (the collector bar slot at 17k
             DOFs, 18 Newton steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D
@@ -191,6 +194,9 @@ class Subdomains:
         self.system: System | None = None
         self.strip: StripSolve | None = None  # the sparse strip corrector's operator
         self._freed_factorisations = 0
+        #: Set-ups that kept a slowing preconditioner because the sparse strip's new
+        #: factorisation would not fit in memory (:meth:`StripSolve.fits`)
+        self.kept_for_memory = 0
 
     @property
     def factorisations(self) -> int:
@@ -253,6 +259,8 @@ class Subdomains:
         self.error_weights = self._error_weights() if weigh else None
         lag = self.lag and self.use_krylov and iterative  # its build costs Krylov body solves
         self._lagged = lag and kept and not self._built["stale"]
+        if lag and kept and not self._lagged and not self._room_for_strip():
+            self._lagged = True  # slower, but a new factorisation of the strip would not fit
         if not self._lagged:
             self._build_preconditioner()
 
@@ -588,6 +596,25 @@ class Subdomains:
         U, sigma, _ = np.linalg.svd(np.column_stack(columns), full_matrices=False)
         return U[:, sigma > 1e-10 * max(sigma.max(), 1e-300)]
 
+    def _room_for_strip(self) -> bool:
+        """Whether the sparse strip (if any) can be factorised again in the memory left.
+
+        If not, the kept preconditioner serves from now on without the :data:`LAG_GROWTH`
+        limit.
+        """
+        if self.strip is None or self.strip.fits():
+            return True
+        self._built["unlimited"] = True
+        self.kept_for_memory += 1
+        return False
+
+    def _iteration_limit(self) -> int:
+        """The interface Krylov's iterations: fewer with a kept preconditioner that may slow."""
+        built = self._built
+        if self._lagged and built["iterations"] is not None and not built.get("unlimited"):
+            return min(self.max_rounds, int(LAG_GROWTH * built["iterations"]) + 1)
+        return self.max_rounds
+
     def _solve_krylov_lagged(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         """The interface Krylov solve; with a kept preconditioner, rebuilt if it fails or slows."""
         before = 0
@@ -597,7 +624,9 @@ class Subdomains:
             if not self._lagged:
                 raise
             before = len(result.krylov_iterations)
-            self._build_preconditioner()  # for the current bodies, then once more
+            slowed = self._iteration_limit() < self.max_rounds  # it stopped at the limit
+            if not (slowed and not self._room_for_strip()):
+                self._build_preconditioner()  # for the current bodies, then once more
             y = self._solve_krylov(b, tolerance, result)
         built, iterations = self._built, sum(result.krylov_iterations[before:])
         if built["iterations"] is None:
@@ -705,10 +734,7 @@ class Subdomains:
         ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         ksp.getPC().setType("python")
         ksp.getPC().setPythonContext(_Preconditioner(self, weights))
-        limit = self.max_rounds
-        if self._lagged and self._built["iterations"] is not None:  # a kept one that slows
-            limit = min(limit, int(LAG_GROWTH * self._built["iterations"]) + 1)  # is rebuilt
-        ksp.setTolerances(rtol=0.0, atol=0.5, max_it=limit)
+        ksp.setTolerances(rtol=0.0, atol=0.5, max_it=self._iteration_limit())
         if any(body.iterative for body in system.bodies.values()):
 
             def relax(ksp: PETSc.KSP, iteration: int, norm: float) -> None:

@@ -6,6 +6,7 @@ import pytest
 from petsc4py import PETSc
 
 import subdomain_contact as sc
+from subdomain_contact import solvers as solvers_module
 from subdomain_contact import system as system_module
 from subdomain_contact.monolithic import field_splits
 from subdomain_contact.newton import FORCING, FORCING_ITERATIVE
@@ -178,6 +179,36 @@ def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
     # both Newtons stop at 1e-12 of the first residual; measured ≤ 1e-13 relative to each
     # field's range (2e-14 on 4 blocks of 1.5k DOFs): 100× margin for other BLAS kernels
     assert max(errors) <= 1e-11
+
+
+def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(comm, monkeypatch):
+    """Where the sparse strip's new factorisation would not fit in a node's memory left, the
+    kept preconditioner serves on without the LAG_GROWTH limit; where only a new one can
+    serve, a MemoryError names the strip, the sizes and what to try, before MUMPS runs (where
+    the operating system would kill a rank: the slot at 1.14M DOFs), and no line search
+    tries again. The row of four 3D blocks, as above, with no memory left after the first
+    build (measured here: kept at a set-up, then its Krylov solve stalled and the error)."""
+    scene = blocks_row_scene(4, 0.05, comm=comm)
+    with sc.System(squeezed_row(scene), solver="iterative") as system:
+        system.reset({"temperature": 300.0})
+        linear = sc.Subdomains()
+        monkeypatch.setattr(solvers_module, "available_memory", lambda: 0.0)
+        pattern = (
+            r"sparse strip corrector: factorising the strip \(\d+ rows\) again needs about .* GB"
+            r" on a node .* where 0 GB is available\. Try block low-rank factors "
+            r"\(-sc_strip_mat_mumps_icntl_35 2"
+        )
+        with pytest.raises(MemoryError, match=pattern):
+            sc.solve(system, linear, rtol=1e-12)
+        assert linear.strip.factorisations == 1  # the first build's, never made again
+        assert linear.kept_for_memory >= 1  # it served on before it had to be rebuilt
+        # what the refusal weighed: the ranks' MUMPS INFO(22) (one node here), with its margin
+        factor = linear.strip.ksp.getPC().getFactorMatrix()
+        used = comm.allreduce(1e6 * factor.getMumpsInfo(22))
+        need, available = solvers_module.refactorisation_memory(linear.strip.ksp, comm)
+        assert used > 0 and available == 0.0
+        assert need == pytest.approx(solvers_module.REFACTORISATION_MARGIN * used, rel=1e-14)
+        linear.destroy()
 
 
 def test_two_cold_starts_with_iterative_bodies_take_the_same_path_bit_for_bit(comm):
