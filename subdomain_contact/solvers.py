@@ -182,9 +182,9 @@ def factorise(
 
 #: A MUMPS factorisation made again on new values needs, beside what stays resident, about the
 #: memory it used the last time (INFO(22)): the sparse strip of the collector bar slot at
-#: 1.14M DOFs (2 ranks, block low-rank) peaked 7.4 GiB above its resident set on the node for
-#: INFO(22) summing to 7.2 GiB (1.03 times); 1.25 leaves room for the copies of its matrix
-#: made with it.
+#: 1.14M DOFs (2 ranks, block low-rank) peaked 7.6 GiB above the node's resident set before
+#: it, for INFO(22) summing to 7.2 GiB (1.05 times); 1.25 leaves room for the copies of its
+#: matrix made with it.
 REFACTORISATION_MARGIN = 1.25
 
 
