@@ -50,7 +50,15 @@ from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor, condensation
-from subdomain_contact.solvers import DIRECT, destroy, factorise, make_ksp, ordered, ordering
+from subdomain_contact.solvers import (
+    DIRECT,
+    destroy,
+    factorise,
+    make_ksp,
+    ordered,
+    ordering,
+    refactorisation_shortfall,
+)
 
 __all__ = ["ITERATIVE", "SPLIT", "SPLIT_FIELD", "Body"]
 
@@ -525,7 +533,14 @@ class Body:
         return rows, shares
 
     def _factorise_whole(self) -> None:
-        """``A`` as one sparse matrix, factorised by MUMPS (distributed), or its AMG set up."""
+        """``A`` as one sparse matrix, factorised by MUMPS (distributed), or its AMG set up.
+
+        Raises:
+            MemoryError: Factorising it again would not fit in a node's memory left; said
+                before ``A`` takes new values (the kept factors still solve the old ones).
+        """
+        if self.ksp is not None and not self.iterative:
+            self._refuse_what_would_not_fit()
         self.whole_matrix()
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
@@ -548,6 +563,20 @@ class Body:
             again = not self.is_linear
             self.ksp = factorise(self._A, self.prefix, what, self.ksp, dim=self.dim, again=again)
         self.factorisations += 1
+
+    def _refuse_what_would_not_fit(self) -> None:
+        """A MemoryError where the body's new factorisation would exhaust a node's memory.
+
+        Not a rank killed by the operating system (:func:`refactorisation_shortfall`).
+        """
+        shortfall = refactorisation_shortfall(self.ksp, self.comm)
+        if shortfall is not None:
+            raise MemoryError(
+                f"body '{self.name}' ({self._A.getSize()[0]} DOFs): {shortfall}. Try the body "
+                f"solved iteratively (-{self.prefix}solver iterative), block low-rank factors "
+                f"(-{self.prefix}mat_mumps_icntl_35 2 -{self.prefix}mat_mumps_cntl_7 1e-5), "
+                "or fewer ranks per node"
+            )
 
     def _field_splits(self) -> list[tuple[str, PETSc.IS]]:
         """Each field's owned DOFs (global, ascending) for :data:`SPLIT`.

@@ -29,12 +29,7 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, merged_matrix, same_pattern
-from subdomain_contact.solvers import (
-    REFACTORISATION_MARGIN,
-    destroy,
-    factorise,
-    refactorisation_memory,
-)
+from subdomain_contact.solvers import destroy, factorise, refactorisation_shortfall
 from subdomain_contact.system import System
 
 __all__ = [
@@ -258,8 +253,7 @@ class StripSolve:
 
     def fits(self) -> bool:
         """Whether factorising the strip again fits in the memory its nodes have left."""
-        need, available = refactorisation_memory(self.ksp, self.comm)
-        return available is None or need <= available
+        return refactorisation_shortfall(self.ksp, self.comm) is None
 
     def _refuse_what_would_not_fit(self) -> None:
         """A clear error where factorising again would exhaust a node's memory.
@@ -267,15 +261,13 @@ class StripSolve:
         The operating system would otherwise kill a rank (the collector bar slot at 1.14M
         DOFs, 2 ranks on 23.5 GB: the strip's second factorisation, 2026-11-27).
         """
-        need, available = refactorisation_memory(self.ksp, self.comm)
-        if available is not None and need > available:
+        shortfall = refactorisation_shortfall(self.ksp, self.comm)
+        if shortfall is not None:
             raise MemoryError(
-                f"sparse strip corrector: factorising the strip ({self.K.getSize()[0]} rows) "
-                f"again needs about {need / 1e9:.3g} GB on a node (MUMPS INFO(22) of its last "
-                f"factorisation, times {REFACTORISATION_MARGIN}) where {available / 1e9:.3g} "
-                "GB is available. Try block low-rank factors (-sc_strip_mat_mumps_icntl_35 2 "
-                "-sc_strip_mat_mumps_cntl_7 1e-5), fewer ranks per node, or a narrower strip "
-                "(SparseStrip(layers=..., share=...))"
+                f"sparse strip corrector ({self.K.getSize()[0]} rows): {shortfall}. Try block "
+                "low-rank factors (-sc_strip_mat_mumps_icntl_35 2 -sc_strip_mat_mumps_cntl_7 "
+                "1e-5), fewer ranks per node, or a narrower strip (SparseStrip(layers=..., "
+                "share=...))"
             )
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

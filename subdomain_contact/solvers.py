@@ -20,6 +20,7 @@ __all__ = [
     "ordered",
     "ordering",
     "refactorisation_memory",
+    "refactorisation_shortfall",
 ]
 
 #: Sparse direct solve by MUMPS (the factorisation is kept and reused).
@@ -218,6 +219,23 @@ def refactorisation_memory(ksp: PETSc.KSP, comm: MPI.Comm) -> tuple[float, float
     shortest = available - need if available is not None and mumps else np.inf
     worst = comm.allreduce((shortest, comm.rank), op=MPI.MINLOC)[1]
     return comm.bcast((need, available), root=worst)
+
+
+def refactorisation_shortfall(ksp: PETSc.KSP, comm: MPI.Comm) -> str | None:
+    """Why factorising ``ksp``'s matrix again would not fit; None where it fits.
+
+    The words say what it needs and what the node shortest of memory has. Collective on
+    ``comm``. Call it before the matrix takes new values: after, a solve with the old KSP
+    would have PETSc factorise it again unasked.
+    """
+    need, available = refactorisation_memory(ksp, comm)
+    if available is None or need <= available:
+        return None
+    return (
+        f"factorising it again needs about {need / 1e9:.3g} GB on a node (MUMPS INFO(22) of "
+        f"its last factorisation, times {REFACTORISATION_MARGIN}) where {available / 1e9:.3g} "
+        "GB is available"
+    )
 
 
 def destroy(*objects: PETSc.Object | None) -> None:

@@ -221,8 +221,12 @@ class Subdomains:
         if self.system is not system:
             self.destroy()
         self.system = system
-        for body in system.bodies.values():
-            body.factorise()
+
+        def factorise() -> None:
+            for body in system.bodies.values():
+                body.factorise()
+
+        together(system.comm, factorise)
         scene = system.problem.scene
         costly = system.comm.allreduce(
             any(not (b.condensed or self._dense(b)) for b in system.bodies.values()),
@@ -799,18 +803,21 @@ def together(comm: MPI.Comm, work: Callable[[], None]) -> None:
 
     A body on a rank group fails there alone (an iterative solve that stops short); the other
     ranks would wait for it in the next collective call. Here they raise too, with its
-    message, so that Newton's next line search or the caller sees one failure everywhere.
+    message, so that Newton's next line search or the caller sees one failure everywhere. A
+    ``MemoryError`` stays one on every rank: Newton does not try it again.
     """
     error: Exception | None = None
     try:
         work()
     except Exception as failure:
         error = failure
-    messages = [m for m in comm.allgather(None if error is None else str(error)) if m]
+    failed = None if error is None else (isinstance(error, MemoryError), str(error))
+    failures = [f for f in comm.allgather(failed) if f is not None]
     if error is not None:
         raise error
-    if messages:
-        raise RuntimeError(f"on another rank: {messages[0]}")
+    if failures:
+        memory, message = failures[0]
+        raise (MemoryError if memory else RuntimeError)(f"on another rank: {message}")
 
 
 def _default_option(name: str, value: str) -> bool:

@@ -194,7 +194,7 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
         linear = sc.Subdomains()
         monkeypatch.setattr(solvers_module, "available_memory", lambda: 0.0)
         pattern = (
-            r"sparse strip corrector: factorising the strip \(\d+ rows\) again needs about .* GB"
+            r"sparse strip corrector \(\d+ rows\): factorising it again needs about .* GB"
             r" on a node .* where 0 GB is available\. Try block low-rank factors "
             r"\(-sc_strip_mat_mumps_icntl_35 2"
         )
@@ -209,6 +209,28 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
         assert used > 0 and available == 0.0
         assert need == pytest.approx(solvers_module.REFACTORISATION_MARGIN * used, rel=1e-14)
         linear.destroy()
+
+
+def test_a_body_that_would_not_fit_again_is_refused_by_a_clear_error_on_every_rank(
+    comm, monkeypatch
+):
+    """A factorised body whose new factorisation would not fit in a node's memory left: a
+    MemoryError names the body and what to try, before its matrix takes new values, on every
+    rank (rank 0 alone is short of memory here: on 2 ranks the other block's rank raises it
+    too instead of waiting in the next collective call), and no line search tries again. The
+    row of four 3D blocks with factorised bodies held whole (no Schur block): the Jacobian
+    of the cold start depends on the state, so the second Newton step factorises again."""
+    scene = blocks_row_scene(4, 0.05, comm=comm)
+    with sc.System(squeezed_row(scene), solver="direct", schur=False) as system:
+        system.reset({"temperature": 300.0})
+        if comm.rank == 0:
+            monkeypatch.setattr(solvers_module, "available_memory", lambda: 0.0)
+        body = r"body 'block_\d' \(\d+ DOFs\): factorising it again needs about .* GB on a node"
+        pattern = body if comm.rank == 0 else rf"on another rank: {body}"
+        with pytest.raises(MemoryError, match=pattern + r".* where 0 GB is available\. Try"):
+            sc.solve(system, sc.Subdomains(), rtol=1e-12)
+        if comm.rank == 0:  # its bodies factorised once: the refusal came before MUMPS ran
+            assert all(b.factorisations == 1 for b in system.bodies.values())
 
 
 def test_two_cold_starts_with_iterative_bodies_take_the_same_path_bit_for_bit(comm):
