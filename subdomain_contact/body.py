@@ -57,7 +57,7 @@ from subdomain_contact.solvers import (
     make_ksp,
     ordered,
     ordering,
-    refactorisation_shortfall,
+    refuse_refactorisation,
 )
 
 __all__ = ["ITERATIVE", "SPLIT", "SPLIT_FIELD", "Body"]
@@ -540,7 +540,14 @@ class Body:
                 before ``A`` takes new values (the kept factors still solve the old ones).
         """
         if self.ksp is not None and not self.iterative:
-            self._refuse_what_would_not_fit()
+            refuse_refactorisation(
+                self.ksp,
+                self.comm,
+                f"body '{self.name}' ({self._A.getSize()[0]} DOFs)",
+                f"the body solved iteratively (-{self.prefix}solver iterative), block low-rank "
+                f"factors (-{self.prefix}mat_mumps_icntl_35 2 -{self.prefix}mat_mumps_cntl_7 "
+                "1e-5), or fewer ranks per node",
+            )
         self.whole_matrix()
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
@@ -563,20 +570,6 @@ class Body:
             again = not self.is_linear
             self.ksp = factorise(self._A, self.prefix, what, self.ksp, dim=self.dim, again=again)
         self.factorisations += 1
-
-    def _refuse_what_would_not_fit(self) -> None:
-        """A MemoryError where the body's new factorisation would exhaust a node's memory.
-
-        Not a rank killed by the operating system (:func:`refactorisation_shortfall`).
-        """
-        shortfall = refactorisation_shortfall(self.ksp, self.comm)
-        if shortfall is not None:
-            raise MemoryError(
-                f"body '{self.name}' ({self._A.getSize()[0]} DOFs): {shortfall}. Try the body "
-                f"solved iteratively (-{self.prefix}solver iterative), block low-rank factors "
-                f"(-{self.prefix}mat_mumps_icntl_35 2 -{self.prefix}mat_mumps_cntl_7 1e-5), "
-                "or fewer ranks per node"
-            )
 
     def _field_splits(self) -> list[tuple[str, PETSc.IS]]:
         """Each field's owned DOFs (global, ascending) for :data:`SPLIT`.

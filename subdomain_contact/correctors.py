@@ -29,7 +29,12 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, merged_matrix, same_pattern
-from subdomain_contact.solvers import destroy, factorise, refactorisation_shortfall
+from subdomain_contact.solvers import (
+    destroy,
+    factorise,
+    refactorisation_shortfall,
+    refuse_refactorisation,
+)
 from subdomain_contact.system import System
 
 __all__ = [
@@ -233,8 +238,15 @@ class StripSolve:
                 picked.append(np.arange(first, first + self.masters))
             indices = np.sort(np.concatenate(picked)).astype(PETSc.IntType)
             self.rows = PETSc.IS().createGeneral(indices, comm=self.comm)
-        if self.ksp is not None:
-            self._refuse_what_would_not_fit()
+        if self.ksp is not None:  # the strip of the collector bar slot at 1.14M DOFs on 2
+            refuse_refactorisation(  # ranks: killed at its second factorisation, 2026-11-27
+                self.ksp,
+                self.comm,
+                f"sparse strip corrector ({self.K.getSize()[0]} rows)",
+                "block low-rank factors (-sc_strip_mat_mumps_icntl_35 2 "
+                "-sc_strip_mat_mumps_cntl_7 1e-5), fewer ranks per node, or a narrower strip "
+                "(SparseStrip(layers=..., share=...))",
+            )
         whole = merged_matrix(system)
         K = whole.createSubMatrix(self.rows, self.rows)
         whole.destroy()
@@ -254,21 +266,6 @@ class StripSolve:
     def fits(self) -> bool:
         """Whether factorising the strip again fits in the memory its nodes have left."""
         return refactorisation_shortfall(self.ksp, self.comm) is None
-
-    def _refuse_what_would_not_fit(self) -> None:
-        """A clear error where factorising again would exhaust a node's memory.
-
-        The operating system would otherwise kill a rank (the collector bar slot at 1.14M
-        DOFs, 2 ranks on 23.5 GB: the strip's second factorisation, 2026-11-27).
-        """
-        shortfall = refactorisation_shortfall(self.ksp, self.comm)
-        if shortfall is not None:
-            raise MemoryError(
-                f"sparse strip corrector ({self.K.getSize()[0]} rows): {shortfall}. Try block "
-                "low-rank factors (-sc_strip_mat_mumps_icntl_35 2 -sc_strip_mat_mumps_cntl_7 "
-                "1e-5), fewer ranks per node, or a narrower strip (SparseStrip(layers=..., "
-                "share=...))"
-            )
 
     def apply(self, r: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """``G r`` for concatenated master residuals r (replicated; the result too)."""

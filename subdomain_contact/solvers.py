@@ -21,6 +21,7 @@ __all__ = [
     "ordering",
     "refactorisation_memory",
     "refactorisation_shortfall",
+    "refuse_refactorisation",
 ]
 
 #: Sparse direct solve by MUMPS (the factorisation is kept and reused).
@@ -236,6 +237,16 @@ def refactorisation_shortfall(ksp: PETSc.KSP, comm: MPI.Comm) -> str | None:
         f"its last factorisation, times {REFACTORISATION_MARGIN}) where {available / 1e9:.3g} "
         "GB is available"
     )
+
+
+def refuse_refactorisation(ksp: PETSc.KSP, comm: MPI.Comm, what: str, advice: str) -> None:
+    """A MemoryError naming ``what`` and ``advice`` where a new factorisation would not fit.
+
+    Said before the kernel kills a rank (:func:`refactorisation_shortfall`); collective.
+    """
+    shortfall = refactorisation_shortfall(ksp, comm)
+    if shortfall is not None:
+        raise MemoryError(f"{what}: {shortfall}. Try {advice}")
 
 
 def destroy(*objects: PETSc.Object | None) -> None:
