@@ -179,22 +179,36 @@ class SparseStrip:
     body's DOFs (at least one layer): it is factorised, where the body is solved iteratively
     so as not to be. Ten layers covered most of each block of the row of four 3D blocks
     (75k DOFs: peak memory 1.31 GiB against 0.92 GiB with three layers, 143 s against 137 s).
+
+    Where the first factorisation of the strip would not fit again in the memory its nodes
+    have left (:meth:`StripSolve.fits`), the strip is made again ``narrowest`` layers wide,
+    once: a Newton step or a rebuilt preconditioner factorises it again. The collector bar
+    slot at 1.07M DOFs on 2 ranks: ten layers 436,675 rows and 10.6 GB of factors, which a
+    second factorisation would not fit beside; one layer 228,455 rows and 3.49 GB (at 174k
+    DOFs one layer took the same Newton path as ten in 0.80 of the time).
     """
 
     layers: int = 10
     share: float = 0.25
+    narrowest: int = 1
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
 
     def build(self, system: System, operator: StripSolve | None = None) -> StripSolve:
         """Its operator for the system's assembled blocks (``operator``: the last one, kept)."""
-        if self.layers < 1:
-            raise ValueError(f"sparse strip corrector: layers = {self.layers}")
+        if not 1 <= self.narrowest <= self.layers:
+            raise ValueError(
+                f"sparse strip corrector: layers = {self.layers}, narrowest = {self.narrowest}"
+                " (1 ≤ narrowest ≤ layers)"
+            )
         if not 0.0 < self.share <= 1.0:
             raise ValueError(f"sparse strip corrector: share = {self.share}, not in (0, 1]")
         if operator is None:
-            operator = StripSolve(self.prefix)
-        operator.update(system, self.layers, self.share)
+            operator = StripSolve(self.prefix, self.layers, self.share)
+        operator.update(system)
+        if operator.layers > self.narrowest and operator.factorisations == 1:
+            if not operator.fits():  # its next factorisation would not fit: narrower, once
+                operator.narrow(system, self.narrowest)
         return operator
 
 
@@ -204,8 +218,13 @@ class StripSolve:
     Call :meth:`destroy` (collectively) when done.
     """
 
-    def __init__(self, prefix: str) -> None:
+    def __init__(self, prefix: str, layers: int, share: float = 1.0) -> None:
         self.prefix = prefix
+        #: Element layers of each body's strip; ``share``: the largest part of an iterative
+        #: body's DOFs in it
+        self.layers, self.share = layers, share
+        #: The layers of its first build where :meth:`narrow` made it narrower
+        self.narrowed_from: int | None = None
         self.K: PETSc.Mat | None = None
         self.ksp: PETSc.KSP | None = None
         self.rows: PETSc.IS | None = None
@@ -215,11 +234,9 @@ class StripSolve:
         #: whole ``S^α``, kernel modes included.
         self.whole: frozenset[str] = frozenset()
 
-    def update(self, system: System, layers: int, share: float = 1.0) -> None:
-        """Restrict the merged matrix to the strips and factorise (its analysis kept).
-
-        ``share``: the largest part of an iterative body's DOFs in its strip.
-        """
+    def update(self, system: System) -> None:
+        """Restrict the merged matrix to the strips and factorise (its analysis kept)."""
+        layers, share = self.layers, self.share
         self.comm = system.comm
         if self.rows is None:
             layout = Layout(system)
@@ -262,6 +279,14 @@ class StripSolve:
             self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
         )
         self.factorisations += 1
+
+    def narrow(self, system: System, layers: int) -> None:
+        """Free the strip and its factorisation, and make it again ``layers`` wide."""
+        self.narrowed_from = self.narrowed_from or self.layers
+        destroy(self.K, self.ksp, self.rows)
+        self.K = self.ksp = self.rows = None
+        self.layers = layers
+        self.update(system)
 
     def fits(self) -> bool:
         """Whether factorising the strip again fits in the memory its nodes have left."""

@@ -199,7 +199,8 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
     serve, a MemoryError names the strip, the sizes and what to try, before MUMPS runs (where
     the operating system would kill a rank: the slot at 1.14M DOFs), and no line search
     tries again. The row of four 3D blocks, as above, with no memory left after the first
-    build (measured here: kept at a set-up, then its Krylov solve stalled and the error)."""
+    build (measured here: kept at a set-up, then its Krylov solve stalled and the error); the
+    first build made the strip one layer wide, which does not fit either."""
     scene = blocks_row_scene(4, 0.05, comm=comm)
     with sc.System(squeezed_row(scene), solver="iterative") as system:
         system.reset({"temperature": 300.0})
@@ -212,7 +213,8 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
         )
         with pytest.raises(MemoryError, match=pattern):
             sc.solve(system, linear, rtol=1e-12)
-        assert linear.strip.factorisations == 1  # the first build's, never made again
+        # the first build's two (ten layers, then one: no memory left for ten), never again
+        assert (linear.strip.narrowed_from, linear.strip.factorisations) == (10, 2)
         assert linear.kept_for_memory >= 1  # it served on before it had to be rebuilt
         # what the refusal weighed: the ranks' MUMPS INFO(22) (one node here), with its margin
         factor = linear.strip.ksp.getPC().getFactorMatrix()
@@ -221,6 +223,43 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
         assert used > 0 and available == 0.0
         assert need == pytest.approx(solvers_module.REFACTORISATION_MARGIN * used, rel=1e-14)
         linear.destroy()
+
+
+def test_a_strip_too_wide_to_fit_again_is_made_one_layer_wide(blocks, monkeypatch):
+    """Where the default strip's (ten layers) first factorisation would not fit again in the
+    memory left, it is made one layer wide at once, and solves as a strip of one layer does.
+
+    The two iterative 3D blocks: the node given the memory halfway between what factorising
+    each strip again needs (:func:`solvers.refactorisation_memory`, measured with both)."""
+    h = 1e3
+    needs, rows, counts = {}, {}, {}
+    for layers in (1, 10):
+        with sc.System(heated_blocks(blocks, h=h), solver="iterative") as system:
+            solver = sc.Subdomains(sc.SparseStrip(layers=layers))
+            result = sc.solve(system, solver, rtol=1e-12)
+            needs[layers] = solvers_module.refactorisation_memory(solver.strip.ksp, system.comm)[0]
+            rows[layers] = solver.strip.K.getSize()[0]
+            counts[layers] = sum(result.inner[-1].krylov_iterations)
+            solver.destroy()
+    # ten layers hold each block's share of 0.25, one layer the contact's neighbours only:
+    # measured 808 and 436 rows, factors of 2 and 1 MB serially (MUMPS counts whole MB), 3 and
+    # 2 MB on 2 ranks
+    assert rows[10] > rows[1] and needs[10] > needs[1], (rows, needs)
+    middle = (needs[1] + needs[10]) / 2
+    monkeypatch.setattr(solvers_module, "available_memory", lambda: middle)
+    with sc.System(heated_blocks(blocks, h=h), solver="iterative") as system:
+        solver = sc.Subdomains()
+        result = sc.solve(system, solver, rtol=1e-12)
+        strip = solver.strip
+        assert (strip.narrowed_from, strip.layers, strip.factorisations) == (10, 1, 2)
+        assert strip.K.getSize()[0] == rows[1] and strip.fits()
+        # the same operator as the strip of one layer: the same Krylov iterations (measured 10;
+        # ten layers 6), one more or fewer for rounding
+        assert abs(sum(result.inner[-1].krylov_iterations) - counts[1]) <= 1, counts
+        truth = reference(blocks, h)
+        # the bound of the test at every h above (measured ≤ 1.2e-12 there)
+        assert error_against(system, truth.at(field_values(system)[0])) <= 1e-10
+        solver.destroy()
 
 
 def test_a_body_that_would_not_fit_again_is_refused_by_a_clear_error_on_every_rank(
