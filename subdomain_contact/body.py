@@ -173,7 +173,7 @@ class Body:
         self.iterative = iterative
         contact = len(self.kept)
         alone = schur and not iterative and self.comm.size == 1 and 0 < contact
-        how = condensation(contact, self.size) if alone else ""
+        how = condensation(contact, self.size, self.dim) if alone else ""
         self.schur = how == "block"
         #: A thin body: factorised whole, its ``S^α`` formed densely by multi-column solves.
         self.columns = how == "columns"

@@ -54,36 +54,63 @@ SCHUR_LIMIT = 8000
 THIN_SHARE = 0.5
 
 
-def condensation(contact: int, size: int) -> str:
+def condensation(contact: int, size: int, dim: int) -> str:
     """How a body of ``size`` DOFs on one rank is condensed on its ``contact`` DOFs.
 
     ``"block"``: a dense Schur block (:class:`CondensedFactor`); ``"columns"``: a thin body,
     factorised whole, its ``S^α`` from multi-column solves; ``""``: not condensed, its
     ``S^α`` applied by one body solve per application.
+
+    Above :data:`SCHUR_SMALL` contact DOFs, a 3D body keeps a Schur block only where its
+    dense algebra costs at most its sparse factorisation (:func:`sparse_work`): the contact
+    surface of a 3D body grows as its DOFs to the power 2/3, its dense block's algebra as
+    their square, like the sparse factorisation, with a far larger constant. The collector
+    bar slot at 34,510 DOFs: the block, 19,140 DOFs of which 2,620 on contacts (14 %, a
+    Schur block by the share), 8.5e10 flops dense against 2.9e9 sparse; Newton from 300 K,
+    one rank, 326 s with its Schur block, 176 s factorised whole (the monolithic Newton 124
+    s; the same 19 steps and voltage drop; one run each, 2026-11-28, beside another run).
+    2D is left as it was (not measured).
     """
     if contact <= SCHUR_SMALL:
         return "columns" if contact > THIN_SHARE * size else "block"
-    return "block" if contact <= min(SCHUR_FRACTION * size, SCHUR_LIMIT) else ""
+    if contact > min(SCHUR_FRACTION * size, SCHUR_LIMIT):
+        return ""
+    if dim == 3 and DENSE_BLOCK_WORK * float(contact) ** 3 > sparse_work(size, dim):
+        return ""
+    return "block"
+
+
+#: The dense algebra on a Schur block of n contact DOFs at every update, ``DENSE_BLOCK_WORK
+#: n³`` flops: its LU (2/3 n³), its solve for as many columns (2 n³) and the reaction ``Σ y``
+#: (2 n³). A thin body's multi-column solves are counted as half that (measured at
+#: 0.64–0.84 of its Schur block's time).
+DENSE_BLOCK_WORK = 4.7
+
+
+def sparse_work(size: int, dim: int) -> float:
+    """Flops of the sparse LU of ``size`` unknowns by nested dissection.
+
+    31 size^1.5 in 2D, 8 size² in 3D (MUMPS's count, RINFOG(3), for the 5- and 7-point
+    Laplacians of 3.6k–27k unknowns).
+    """
+    return 31.0 * size**1.5 if dim == 2 else 8.0 * float(size) ** 2
 
 
 def factorisation_work(size: int, contact: int, dim: int) -> float | None:
     """Floating-point operations of a body's factorisation and condensation, estimated.
 
-    The sparse LU of ``size`` unknowns by nested dissection, 31 size^1.5 in 2D and 8 size² in
-    3D (MUMPS's count, RINFOG(3), for the 5- and 7-point Laplacians of 3.6k–27k unknowns);
-    with a Schur block (:func:`condensation`) the dense algebra on it at every update,
-    4.7 n³: its LU (2/3 n³), its solve for as many columns (2 n³) and the reaction ``Σ y``
-    (2 n³); a thin body's multi-column solves, counted as half that (measured at 0.64–0.84
-    of its Schur block's time). In 2D the block is the larger part: the cathode block of the
-    2D preheat, 3.4k nodes of which 347 on contacts, 6.1e6 sparse against 2.0e8 dense. None
+    The sparse LU (:func:`sparse_work`); with a Schur block (:func:`condensation`) the dense
+    algebra on it at every update (:data:`DENSE_BLOCK_WORK`), a thin body's multi-column
+    solves half that. In 2D the block is the larger part: the cathode block of the 2D
+    preheat, 3.4k nodes of which 347 on contacts, 6.1e6 sparse against 2.0e8 dense. None
     for a body that is not condensed: the work of its iterative interface (the sparse strip)
     is not in the estimate.
     """
-    how = condensation(contact, size)
+    how = condensation(contact, size, dim)
     if not how:
         return None
-    sparse = 31.0 * size**1.5 if dim == 2 else 8.0 * float(size) ** 2
-    return sparse + (4.7 if how == "block" else 2.35) * float(contact) ** 3
+    dense = DENSE_BLOCK_WORK if how == "block" else DENSE_BLOCK_WORK / 2
+    return sparse_work(size, dim) + dense * float(contact) ** 3
 
 
 _UNFACTORED = 0  # MatFactorSchurStatus MAT_FACTOR_SCHUR_UNFACTORED

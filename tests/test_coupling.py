@@ -414,6 +414,23 @@ def test_a_thin_body_is_factorised_whole(comm, monkeypatch):
             assert system.bodies["block"].schur
 
 
+def test_a_3d_schur_block_dearer_than_the_factorisation_is_not_kept():
+    """Above SCHUR_SMALL, a 3D body within the share keeps a Schur block only where its dense
+    algebra (4.7 n³ flops) costs at most its sparse factorisation (8 N²); 2D as before.
+
+    The collector bar slot's block at 34,510 DOFs: 19,140 DOFs, 2,620 on contacts (14 %),
+    4.7 · 2620³ = 8.45e10 against 8 · 19140² = 2.93e9: factorised whole (a Newton from 300
+    K in 176 s instead of 326 s). The same contact on 200,000 DOFs: 3.2e11 ≥ 8.45e10."""
+    assert schur_module.condensation(2620, 19_140, 3) == ""
+    assert schur_module.condensation(2620, 19_140, 2) == "block"
+    assert schur_module.condensation(2620, 200_000, 3) == "block"
+    # the threshold: 4.7 n³ = 8 N² at N = (4.7 / 8)^½ n^1.5 = 102,791 for n = 2620
+    assert schur_module.condensation(2620, 102_700, 3) == ""
+    assert schur_module.condensation(2620, 102_900, 3) == "block"
+    # at most SCHUR_SMALL contact DOFs, a Schur block in 3D too (cheap: under 0.1 s)
+    assert schur_module.condensation(schur_module.SCHUR_SMALL, 4000, 3) == "block"
+
+
 # -- nested iteration: a coarse mesh's solution as the fine mesh's initial guess ------------
 
 
