@@ -227,7 +227,8 @@ class StripSolve:
         self.narrowed_from: int | None = None
         self.K: PETSc.Mat | None = None
         self.ksp: PETSc.KSP | None = None
-        self.rows: PETSc.IS | None = None
+        #: This rank's rows of the merged matrix in the strip (sorted global indices)
+        self.rows: npt.NDArray[np.int64] | None = None
         #: Factorisations made
         self.factorisations = 0
         #: Bodies every DOF of which lies in the strip (on every rank): the strip holds their
@@ -253,8 +254,7 @@ class StripSolve:
                 first = layout.mine + system.master_slice.start
                 self.masters = system.local_size - system.master_slice.start
                 picked.append(np.arange(first, first + self.masters))
-            indices = np.sort(np.concatenate(picked)).astype(PETSc.IntType)
-            self.rows = PETSc.IS().createGeneral(indices, comm=self.comm)
+            self.rows = np.sort(np.concatenate(picked)).astype(np.int64)
         if self.ksp is not None:  # the strip of the collector bar slot at 1.14M DOFs on 2
             refuse_refactorisation(  # ranks: killed at its second factorisation, 2026-11-27
                 self.ksp,
@@ -264,9 +264,7 @@ class StripSolve:
                 "-sc_strip_mat_mumps_cntl_7 1e-5), fewer ranks per node, or a narrower strip "
                 "(SparseStrip(layers=..., share=...))",
             )
-        whole = merged_matrix(system)
-        K = whole.createSubMatrix(self.rows, self.rows)
-        whole.destroy()
+        K = merged_matrix(system, self.rows)
         if self.K is not None and same_pattern(K, self.K):
             K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
             K.destroy()
@@ -283,7 +281,7 @@ class StripSolve:
     def narrow(self, system: System, layers: int) -> None:
         """Free the strip and its factorisation, and make it again ``layers`` wide."""
         self.narrowed_from = self.narrowed_from or self.layers
-        destroy(self.K, self.ksp, self.rows)
+        destroy(self.K, self.ksp)
         self.K = self.ksp = self.rows = None
         self.layers = layers
         self.update(system)
@@ -308,8 +306,8 @@ class StripSolve:
         return self.comm.bcast(z, root=0)
 
     def destroy(self) -> None:
-        """Free the matrix, its factorisation and the index set (collective)."""
-        destroy(self.K, self.ksp, self.rows)
+        """Free the matrix and its factorisation (collective)."""
+        destroy(self.K, self.ksp)
         self.K = self.ksp = self.rows = None
 
 
