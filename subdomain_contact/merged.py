@@ -66,7 +66,7 @@ def _body_entries(
         rows = [(first_row + np.repeat(np.arange(body.size), counts),
                  layout.body(name, indices), data)]  # fmt: skip
     else:
-        picked = _within(first_row + np.arange(body.size), keep)
+        picked = np.isin(first_row + np.arange(body.size), keep)
         entries = np.repeat(picked, counts)
         rows = [(first_row + np.repeat(np.flatnonzero(picked), counts[picked]),
                  layout.body(name, indices[entries]), data[entries])]  # fmt: skip
@@ -100,17 +100,11 @@ def _body_entries(
     return rows, masters
 
 
-def _within(g: npt.NDArray, keep: npt.NDArray) -> npt.NDArray[np.bool_]:
-    """Whether each global index of ``g`` is in the sorted ``keep``."""
-    at = np.minimum(np.searchsorted(keep, g), max(keep.size - 1, 0))
-    return keep[at] == g if keep.size else np.zeros(g.shape, dtype=bool)
-
-
 def _restricted(parts: list[Entries], keep: npt.NDArray) -> list[Entries]:
     """The entries whose row and column are in ``keep``, renumbered to their places in it."""
     out = []
     for r, c, v in parts:
-        inside = _within(r, keep) & _within(c, keep)
+        inside = np.isin(r, keep) & np.isin(c, keep)
         out.append((np.searchsorted(keep, r[inside]), np.searchsorted(keep, c[inside]), v[inside]))
     return out
 
