@@ -46,7 +46,7 @@ parser.add_argument("--no-monolithic", action="store_true", help="subdomain Newt
 parser.add_argument(
     "--bodies", default="auto", choices=["auto", "direct", "iterative"],
     help="the subdomain route's body solves (sc.System's solver): auto is iterative for a "
-    "3D body whose largest front exceeds system.FRONT_ABOVE DOFs",
+    "3D body whose largest front exceeds scene.FRONT_ABOVE DOFs",
 )  # fmt: skip
 parser.add_argument("--history", action="store_true", help="print each Newton's history")
 parser.add_argument("--progress", action="store_true", help="a line per Newton iterate")

@@ -31,6 +31,57 @@ PLACEMENT_FIELDS = 2
 
 __all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_points"]
 
+#: A rank whose load (cells, or factorisation work, over its ranks) exceeds the mean load of
+#: the ranks by more than this factor, with a body on it that may be solved iteratively,
+#: makes :func:`load_scene` spread every body over all ranks instead (``"auto"``). A body
+#: solved by Krylov + AMG spreads well, and alone on its ranks it leaves the others waiting
+#: in its collective calls (``gdb``: the collector bar slot at 1.07M DOFs, 2 ranks, the
+#: block of 794k DOFs on one, the bar and cast iron on the other). The factor is the inverse
+#: of a spread solve's parallel efficiency on 2 ranks, 0.78–0.82 (the slot at 204k DOFs: 2
+#: ranks took 0.61–0.64 of one rank's time). Measured, the slot at 34,510 DOFs nested from
+#: 9,075 (2 ranks, one BLAS thread, the block made iterative by option, 2026-11-28; the block
+#: 73 % of the cells, 1.45 times the mean): bodies on rank groups 94.8 s on the fine level,
+#: spread 70.9 s, the same 10 Newton steps. Where every body is factorised the groups win
+#: (the same mesh, 77.7 s against 85.6 s), so factorised bodies alone never spread.
+SPREAD_LOAD = 1.25
+
+#: A body meshed in 3D is solved iteratively by default (``solver="auto"``) where its largest
+#: front (:func:`largest_front`) holds more DOFs than this. A sparse factorisation stores about
+#: front² and works about front³ (nested dissection), so it outgrows a chunky body, not a
+#: slender one: a cube of 100k DOFs of T, φ and u has a front of 7.8k (iterative), the
+#: collector bar slot's bar at 1M DOFs (0.16 × 0.08 m across, 2.2 m long) 1.2k (factorised).
+#: A cube of one field passes it at about 125k DOFs.
+FRONT_ABOVE = 5_000
+
+
+def largest_front(mesh: dolfinx.mesh.Mesh, per_node: int) -> int:
+    """DOFs near the cut across a body's longest side at its middle: about its largest front.
+
+    The nodes within half a mean cell diameter of the plane that halves the longest side
+    of the body's bounding box (about two layers of nodes), times the DOFs per node. The
+    first cut of a nested-dissection ordering, the costliest front of the factorisation.
+    """
+    comm, tdim = mesh.comm, mesh.topology.dim
+    owned = mesh.geometry.index_map().size_local
+    x = mesh.geometry.x[:owned]
+    lo, hi = np.empty(3), np.empty(3)
+    comm.Allreduce(x.min(axis=0) if owned else np.full(3, np.inf), lo, op=MPI.MIN)
+    comm.Allreduce(x.max(axis=0) if owned else np.full(3, -np.inf), hi, op=MPI.MAX)
+    side = int(np.argmax(hi - lo))
+    cells = mesh.topology.index_map(tdim).size_local
+    diameters = comm.allreduce(mesh.h(tdim, np.arange(cells, dtype=np.int32)).sum())
+    h = diameters / comm.allreduce(cells)
+    near = np.abs(x[:, side] - 0.5 * (lo[side] + hi[side])) < 0.5 * h
+    return per_node * comm.allreduce(int(np.count_nonzero(near)))
+
+
+def iterative_by_size(mesh: dolfinx.mesh.Mesh, per_node: int) -> bool:
+    """Whether a body of ``mesh`` is solved by Krylov + AMG by default (its solver "auto").
+
+    3D, with its largest front (:func:`largest_front`) above :data:`FRONT_ABOVE` DOFs.
+    """
+    return mesh.topology.dim == 3 and largest_front(mesh, per_node) > FRONT_ABOVE
+
 
 @dataclass(frozen=True)
 class Body:
@@ -175,7 +226,10 @@ def load_scene(
             per group when there are enough ranks, in proportion to their cells; several
             bodies per rank otherwise). Every rank meshes the file and keeps the master
             layers; a group distributes only its own bodies. ``"auto"`` (default):
-            ``"groups"`` with several bodies on several ranks, else ``"shared"``. A scene
+            ``"groups"`` with several bodies on several ranks, else ``"shared"``; with every
+            body spread over all ranks (one group) where a body that may be solved
+            iteratively (:func:`iterative_by_size` with T, φ and u) would leave a rank more
+            than :data:`SPREAD_LOAD` times the mean load. A scene
             of the same bodies (on ``comm``): its rank groups, so that a state interpolates
             between the two (a coarser mesh of a nested iteration, ``System.interpolate``).
 
@@ -186,6 +240,7 @@ def load_scene(
     """
     path = Path(path)
     like = placement if isinstance(placement, Scene) else None
+    auto = placement == "auto"
     if like is not None:
         if set(like.owner) != set(bodies):
             raise ValueError(
@@ -206,6 +261,7 @@ def load_scene(
             ),
             comm,
             like,
+            spread=auto,
         )
     if placement not in ("shared", "groups"):
         raise ValueError(f"placement = {placement!r}: use 'auto', 'shared' or 'groups'")
@@ -241,8 +297,13 @@ def load_scene(
     return Scene(path, comm, scene_bodies, scene_interfaces, owner, 0, comm, (0,))
 
 
-def _grouped(serial: Scene, comm: MPI.Comm, like: Scene | None = None) -> Scene:
-    """Place the bodies of a serial scene (on every rank) on ``like``'s rank groups, or new."""
+def _grouped(
+    serial: Scene, comm: MPI.Comm, like: Scene | None = None, *, spread: bool = False
+) -> Scene:
+    """Place the bodies of a serial scene (on every rank) on ``like``'s rank groups, or new.
+
+    ``spread``: one group of every rank where :func:`_place` finds that it balances better.
+    """
     if like is not None:
         owner, group_of_rank = dict(like.owner), comm.allgather(like.group)
     else:
@@ -250,7 +311,13 @@ def _grouped(serial: Scene, comm: MPI.Comm, like: Scene | None = None) -> Scene:
             n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
             for n, b in serial.bodies.items()
         }
-        owner, group_of_rank = _place(cells, _work(serial), comm.size)
+        # a body that some problem (T, φ and u: dim + 2 unknowns per node) solves iteratively
+        most = serial.dim + 2
+        iterative = {
+            n for n, b in serial.bodies.items() if spread and iterative_by_size(b.mesh, most)
+        }
+        work = None if iterative else _work(serial)  # an iterative body is not condensed
+        owner, group_of_rank = _place(cells, work, comm.size, iterative)
     group = group_of_rank[comm.rank]
     group_comm = comm.Split(group, comm.rank)
     roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
@@ -282,9 +349,15 @@ def _work(scene: Scene) -> dict[str, float] | None:
 
 
 def _place(
-    cells: dict[str, int], work: dict[str, float] | None, ranks: int
+    cells: dict[str, int],
+    work: dict[str, float] | None,
+    ranks: int,
+    iterative: set[str] = frozenset(),
 ) -> tuple[dict[str, int], list[int]]:
-    """Body -> group, and rank -> group.
+    """Body -> group, and rank -> group; one group of every rank where that balances better.
+
+    Where a rank holding a body of ``iterative`` carries more than :data:`SPREAD_LOAD` times
+    the mean load, every body is spread over all ranks (one group).
 
     With a rank or more per body, groups sized by cells (a body spread over several ranks is
     factorised whole, a cost that follows its cells). With fewer ranks, bodies packed on
@@ -302,14 +375,21 @@ def _place(
             share[max(names, key=lambda n: cells[n] / share[n])] += 1
         order = list(cells)  # groups in scene order, consecutive ranks
         owner = {n: g for g, n in enumerate(order)}
-        return owner, [owner[n] for n in order for _ in range(share[n])]
-    weight = cells if work is None else work
-    load = [0.0] * ranks
-    owner = {}
-    for name in sorted(weight, key=lambda n: -weight[n]):
-        owner[name] = int(np.argmin(load))
-        load[owner[name]] += weight[name]
-    return owner, list(range(ranks))
+        group_of_rank = [owner[n] for n in order for _ in range(share[n])]
+        load = [cells[order[g]] / share[order[g]] for g in group_of_rank]
+        total = sum(cells.values())
+    else:
+        weight = cells if work is None else work
+        load = [0.0] * ranks
+        owner = {}
+        for name in sorted(weight, key=lambda n: -weight[n]):
+            owner[name] = int(np.argmin(load))
+            load[owner[name]] += weight[name]
+        group_of_rank, total = list(range(ranks)), sum(weight.values())
+    waiting = [load[r] for r, g in enumerate(group_of_rank) if g in {owner[n] for n in iterative}]
+    if max(waiting, default=0.0) > SPREAD_LOAD * total / ranks:
+        return dict.fromkeys(cells, 0), [0] * ranks
+    return owner, group_of_rank
 
 
 def _distribute(body: Body, comm: MPI.Comm) -> Body:

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from subdomain_contact import scene as scene_module
 from subdomain_contact.body import Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
@@ -58,36 +59,6 @@ def _assign(body: Body, pairs) -> bool:
     return bool(changed)
 
 
-#: A body meshed in 3D is solved iteratively by default (``solver="auto"``) where its largest
-#: front (:func:`largest_front`) holds more DOFs than this. A sparse factorisation stores about
-#: front² and works about front³ (nested dissection), so it outgrows a chunky body, not a
-#: slender one: a cube of 100k DOFs of T, φ and u has a front of 7.8k (iterative), the
-#: collector bar slot's bar at 1M DOFs (0.16 × 0.08 m across, 2.2 m long) 1.2k (factorised).
-#: A cube of one field passes it at about 125k DOFs.
-FRONT_ABOVE = 5_000
-
-
-def largest_front(mesh: dolfinx.mesh.Mesh, per_node: int) -> int:
-    """DOFs near the cut across a body's longest side at its middle: about its largest front.
-
-    The nodes within half a mean cell diameter of the plane that halves the longest side
-    of the body's bounding box (about two layers of nodes), times the DOFs per node. The
-    first cut of a nested-dissection ordering, the costliest front of the factorisation.
-    """
-    comm, tdim = mesh.comm, mesh.topology.dim
-    owned = mesh.geometry.index_map().size_local
-    x = mesh.geometry.x[:owned]
-    lo, hi = np.empty(3), np.empty(3)
-    comm.Allreduce(x.min(axis=0) if owned else np.full(3, np.inf), lo, op=MPI.MIN)
-    comm.Allreduce(x.max(axis=0) if owned else np.full(3, -np.inf), hi, op=MPI.MAX)
-    side = int(np.argmax(hi - lo))
-    cells = mesh.topology.index_map(tdim).size_local
-    diameters = comm.allreduce(mesh.h(tdim, np.arange(cells, dtype=np.int32)).sum())
-    h = diameters / comm.allreduce(cells)
-    near = np.abs(x[:, side] - 0.5 * (lo[side] + hi[side])) < 0.5 * h
-    return per_node * comm.allreduce(int(np.count_nonzero(near)))
-
-
 def _iterative(problem: Problem, body, solver: str, prefix: str) -> bool:
     """Whether a body is solved by Krylov + AMG: the option, else ``solver``, else the rule."""
     options = PETSc.Options()
@@ -98,10 +69,8 @@ def _iterative(problem: Problem, body, solver: str, prefix: str) -> bool:
     if solver != "auto":
         return solver == "iterative"
     mesh = body.mesh
-    if mesh.topology.dim != 3:
-        return False
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    return largest_front(mesh, per_node) > FRONT_ABOVE
+    return scene_module.iterative_by_size(mesh, per_node)
 
 
 class System:
@@ -114,7 +83,8 @@ class System:
             block (False: factorise every body whole, as a body on several ranks is).
         solver: How the bodies are solved: ``"direct"`` (MUMPS), ``"iterative"`` (Krylov +
             AMG, :data:`~subdomain_contact.body.ITERATIVE`) or ``"auto"``: iterative for a
-            body meshed in 3D whose largest front exceeds :data:`FRONT_ABOVE` DOFs. The option
+            body meshed in 3D whose largest front exceeds ``scene.FRONT_ABOVE`` DOFs
+            (:func:`~subdomain_contact.scene.iterative_by_size`). The option
             ``-<prefix>body_<name>_solver direct|iterative`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.

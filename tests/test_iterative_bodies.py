@@ -6,8 +6,8 @@ import pytest
 from petsc4py import PETSc
 
 import subdomain_contact as sc
+from subdomain_contact import scene as scene_module
 from subdomain_contact import solvers as solvers_module
-from subdomain_contact import system as system_module
 from subdomain_contact.monolithic import field_splits
 from subdomain_contact.newton import FORCING, FORCING_ITERATIVE
 from subdomain_contact.physics import FIELDS
@@ -129,15 +129,15 @@ def test_the_largest_front_is_the_cut_across_the_longest_side(comm):
     from it, within √3/54), 2 × 28² nodes; a 4 × 1 × 1 bar of 64 × 16 × 16 cubes (a = 1/16)
     keeps x = 2 alone (the next planes lie a = 0.0625 off, beyond √3 a/2 = 0.054), 17²."""
     cube = dolfinx.mesh.create_box(comm, [[0, 0, 0], [1, 1, 1]], [27, 27, 27])
-    assert system_module.largest_front(cube, 1) == 2 * 28**2
-    assert system_module.largest_front(cube, 5) == 5 * 2 * 28**2
+    assert scene_module.largest_front(cube, 1) == 2 * 28**2
+    assert scene_module.largest_front(cube, 5) == 5 * 2 * 28**2
     bar = dolfinx.mesh.create_box(comm, [[0, 0, 0], [1, 1, 4]], [16, 16, 64])
-    assert system_module.largest_front(bar, 1) == 17**2
+    assert scene_module.largest_front(bar, 1) == 17**2
 
 
 def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
     """3D with a front above FRONT_ABOVE DOFs → iterative; 2D never; the option wins."""
-    monkeypatch.setattr(system_module, "FRONT_ABOVE", 50)
+    monkeypatch.setattr(scene_module, "FRONT_ABOVE", 50)
     blocks = blocks3d_scene(0.025, comm=comm)  # 1.6k DOFs per block, fronts of about 130
     with sc.System(heated_blocks(blocks)) as system:
         assert all(body.iterative for body in system.bodies.values())
