@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -352,7 +353,7 @@ def _place(
     cells: dict[str, int],
     work: dict[str, float] | None,
     ranks: int,
-    iterative: set[str] = frozenset(),
+    iterative: AbstractSet[str] = frozenset(),
 ) -> tuple[dict[str, int], list[int]]:
     """Body -> group, and rank -> group; one group of every rank where that balances better.
 

@@ -22,10 +22,10 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact import scene as scene_module
 from subdomain_contact.body import Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
+from subdomain_contact.scene import iterative_by_size
 
 __all__ = ["LawRangeError", "System"]
 
@@ -70,7 +70,7 @@ def _iterative(problem: Problem, body, solver: str, prefix: str) -> bool:
         return solver == "iterative"
     mesh = body.mesh
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    return scene_module.iterative_by_size(mesh, per_node)
+    return iterative_by_size(mesh, per_node)
 
 
 class System:
