@@ -32,8 +32,8 @@ PLACEMENT_FIELDS = 2
 
 __all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_points"]
 
-#: A rank whose load (cells, or factorisation work, over its ranks) exceeds the mean load of
-#: the ranks by more than this factor, with a body on it that may be solved iteratively,
+#: A rank whose load (its bodies' cells, each over the ranks of its group) exceeds the mean
+#: load of the ranks by more than this factor, with a body on it that may be solved iteratively,
 #: makes :func:`load_scene` spread every body over all ranks instead (``"auto"``). A body
 #: solved by Krylov + AMG spreads well, and alone on its ranks it leaves the others waiting
 #: in its collective calls (``gdb``: the collector bar slot at 1.07M DOFs, 2 ranks, the
@@ -314,9 +314,11 @@ def _grouped(
         }
         # a body that some problem (T, φ and u: dim + 2 unknowns per node) solves iteratively
         most = serial.dim + 2
-        iterative = {
-            n for n, b in serial.bodies.items() if spread and iterative_by_size(b.mesh, most)
-        }
+        iterative = (
+            {n for n, b in serial.bodies.items() if iterative_by_size(b.mesh, most)}
+            if spread
+            else set()
+        )
         work = None if iterative else _work(serial)  # an iterative body is not condensed
         owner, group_of_rank = _place(cells, work, comm.size, iterative)
     group = group_of_rank[comm.rank]
@@ -387,7 +389,8 @@ def _place(
             owner[name] = int(np.argmin(load))
             load[owner[name]] += weight[name]
         group_of_rank, total = list(range(ranks)), sum(weight.values())
-    waiting = [load[r] for r, g in enumerate(group_of_rank) if g in {owner[n] for n in iterative}]
+    holding = {owner[n] for n in iterative}  # groups with a body that may be iterative
+    waiting = [load[r] for r, g in enumerate(group_of_rank) if g in holding]
     if max(waiting, default=0.0) > SPREAD_LOAD * total / ranks:
         return dict.fromkeys(cells, 0), [0] * ranks
     return owner, group_of_rank
