@@ -160,11 +160,12 @@ def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
         sc.System(heated_blocks(blocks), solver="amg")
 
 
-def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
-    """T, φ, u through a row of 3D blocks, the inner ones floating: GMRES + GAMG per field.
+def row_against_monolithic(comm, linear):
+    """The row of four 3D blocks (T, φ, u) from 300 K, by the monolithic Newton and by the
+    subdomain Newton with ``linear`` and every body iterative.
 
-    Four blocks of 1.5k DOFs: with one GAMG on each body's whole coupled matrix (before the
-    field split) the interface Krylov stalled 3e-3 off here and Newton failed.
+    Returns: both Newton results, each field's error against the monolithic solution
+    relative to its range, and whether every body was solved iteratively.
     """
     scene = blocks_row_scene(4, 0.05, comm=comm)
     fields = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
@@ -174,21 +175,32 @@ def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
         references = [NodalReference(*field_values(system, f, c)) for f, c in fields]
     with sc.System(squeezed_row(scene), solver="iterative") as system:
         system.reset({"temperature": 300.0})
-        linear = sc.Subdomains()
         result = sc.solve(system, linear, rtol=1e-12)
-        assert all(body.iterative for body in system.bodies.values())
-        # the interface preconditioner (the strip's factorisation, the coarse matrix) is
-        # kept across Newton steps and rebuilt only when the Krylov solve slows past
-        # LAG_GROWTH: measured 7 builds for 13 Jacobians, serial and on 2 ranks
-        assert 1 <= linear.factorisations < result.jacobians
-        # the same Newton: the body solves, exact to 1e-12, keep its quadratic rate (measured
-        # 13 = 13 on one rank, 14 on two: a last residual lands either side of the stopping
-        # test by round-off, one step more at most)
-        assert result.iterations <= monolithic.iterations + 1
+        iterative = all(body.iterative for body in system.bodies.values())
         errors = [
             error_against(system, ref.at(field_values(system, f, c)[0]), f, c)
             for ref, (f, c) in zip(references, fields, strict=True)
         ]
+    return monolithic, result, errors, iterative
+
+
+def test_coupled_newton_with_iterative_bodies_equals_monolithic(comm):
+    """T, φ, u through a row of 3D blocks, the inner ones floating: GMRES + GAMG per field.
+
+    Four blocks of 1.5k DOFs: with one GAMG on each body's whole coupled matrix (before the
+    field split) the interface Krylov stalled 3e-3 off here and Newton failed.
+    """
+    linear = sc.Subdomains()
+    monolithic, result, errors, iterative = row_against_monolithic(comm, linear)
+    assert iterative
+    # the interface preconditioner (the strip's factorisation, the coarse matrix) is
+    # kept across Newton steps and rebuilt only when the Krylov solve slows past
+    # LAG_GROWTH: measured 7 builds for 13 Jacobians, serial and on 2 ranks
+    assert 1 <= linear.factorisations < result.jacobians
+    # the same Newton: the body solves, exact to 1e-12, keep its quadratic rate (measured
+    # 13 = 13 on one rank, 14 on two: a last residual lands either side of the stopping
+    # test by round-off, one step more at most)
+    assert result.iterations <= monolithic.iterations + 1
     # both Newtons stop at 1e-12 of the first residual; measured ≤ 1e-13 relative to each
     # field's range (2e-14 on 4 blocks of 1.5k DOFs): 100× margin for other BLAS kernels
     assert max(errors) <= 1e-11
@@ -215,19 +227,7 @@ def test_a_krylov_solve_stopped_by_a_stale_preconditioner_goes_on_from_its_itera
         return solve(self, b, tolerance, result, start)
 
     monkeypatch.setattr(subdomain_module.Subdomains, "_solve_krylov", recording)
-    scene = blocks_row_scene(4, 0.05, comm=comm)
-    fields = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
-    with sc.System(squeezed_row(scene), solver="direct") as system:
-        system.reset({"temperature": 300.0})
-        monolithic = sc.solve(system, sc.Monolithic(), rtol=1e-12)
-        references = [NodalReference(*field_values(system, f, c)) for f, c in fields]
-    with sc.System(squeezed_row(scene), solver="iterative") as system:
-        system.reset({"temperature": 300.0})
-        result = sc.solve(system, sc.Subdomains(), rtol=1e-12)
-        errors = [
-            error_against(system, ref.at(field_values(system, f, c)[0]), f, c)
-            for ref, (f, c) in zip(references, fields, strict=True)
-        ]
+    monolithic, result, errors, _ = row_against_monolithic(comm, sc.Subdomains())
     continued = [entry for entry in starts if entry is not None]
     # every other Newton step stops its first solve at the limit of one iteration: the
     # continued solve exceeds 0 times the reference too, which marks the new preconditioner
