@@ -118,7 +118,8 @@ RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 MAX_ERROR_WEIGHT = 1e12
 
 #: A kept (lagged) preconditioner is rebuilt after a solve that needed more than this many
-#: times the interface Krylov iterations of the first solve after its build (plus one).
+#: times the interface Krylov iterations of the last fresh solve, the first after a build
+#: that did not go on from a stopped solve (plus one).
 #: Rebuilding costs a factorisation of the strip and one application of ``S`` per coarse
 #: mode (up to 8 per body), each application a solve of every body the mode touches: on
 #: four 3D blocks with iterative bodies (T, φ, u) that was 3.9 s per Newton step against
@@ -147,7 +148,9 @@ class Subdomains:
             cost iterative body solves) from one set-up to the next (Newton steps, time
             steps) while it serves: it is rebuilt when the active master DOFs change, and
             at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
-            iterations of the first solve after its build, unless its strip's new
+            iterations of the last fresh solve (the first after a build that did not go on
+            from a stopped one), the stopped solve then going on from its iterate with the
+            new build, unless its strip's new
             factorisation would not fit in the memory left (kept then, and counted in
             ``kept_for_memory``; where a rebuild is needed, a ``MemoryError`` says so before
             the system kills a rank). It only preconditions: the true
