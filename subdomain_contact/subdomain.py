@@ -93,11 +93,17 @@ class InterfaceResult:
 
 
 class SubdomainConvergenceError(RuntimeError):
-    """The subdomain iteration diverged or did not converge; keeps its result."""
+    """The subdomain iteration diverged or did not converge; keeps its result.
 
-    def __init__(self, message: str, result: InterfaceResult) -> None:
+    ``iterate``: the master increments an interface Krylov solve stopped at by its iteration
+    limit had reached (None otherwise).
+    """
+
+    def __init__(
+        self, message: str, result: InterfaceResult, iterate: dict[str, Vector] | None = None
+    ) -> None:
         super().__init__(message)
-        self.result = result
+        self.result, self.iterate = result, iterate
 
 
 #: An iterative body solve stops at this fraction of the interface's relative tolerance: its
@@ -191,7 +197,6 @@ class Subdomains:
         self.krylov, self.coarse, self.dense_limit = krylov, coarse, dense_limit
         self.lag = lag
         self._built: dict | None = None  # what the kept preconditioner was built for
-        self._stopped: dict[str, Vector] | None = None  # a capped Krylov solve's iterate
         self._lagged = False  # whether this set-up kept it
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
@@ -627,10 +632,10 @@ class Subdomains:
 
     def _solve_krylov_lagged(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         """The interface Krylov solve; with a kept preconditioner, rebuilt if it fails or slows."""
-        before, self._stopped = 0, None
+        before = 0
         try:
             y = self._solve_krylov(b, tolerance, result)
-        except SubdomainConvergenceError:
+        except SubdomainConvergenceError as error:
             if not self._lagged:
                 raise
             before = len(result.krylov_iterations)
@@ -638,12 +643,12 @@ class Subdomains:
             reference = self._built["iterations"]
             if not (slowed and not self._room_for_strip()):
                 self._build_preconditioner()  # for the current bodies, then once more
-                if self._stopped is not None:  # a continued solve is no fresh solve's count
+                if error.iterate is not None:  # a continued solve is no fresh solve's count
                     self._built["iterations"] = reference
             # A solve stopped at the limit goes on from where it stopped, not from zero: on
             # the collector bar slot its iterations had cut the residual by 2 to 6 orders of
             # magnitude (docs/iterative_bodies.md, a stale preconditioner).
-            y = self._solve_krylov(b, tolerance, result, self._stopped)
+            y = self._solve_krylov(b, tolerance, result, error.iterate)
         built, iterations = self._built, sum(result.krylov_iterations[before:])
         if built["iterations"] is None:
             built["iterations"] = iterations
@@ -660,14 +665,15 @@ class Subdomains:
     ) -> Vector:
         """True rounds and interface Krylov solves from the master increments ``start``.
 
-        A Krylov solve stopped by its iteration limit leaves its increments, the iterate it
-        reached, in ``self._stopped`` before the error is raised.
+        A Krylov solve stopped by its iteration limit raises with the increments it reached
+        (``SubdomainConvergenceError.iterate``).
         """
         system = self.system
         self._applications, self._iterations_done = 0, 0
         if start is None:
-            start = {k: np.zeros(n) for k, n in system.sizes.items()}
-        increments = {k: v.copy() for k, v in start.items()}
+            increments = {k: np.zeros(n) for k, n in system.sizes.items()}
+        else:
+            increments = {k: v.copy() for k, v in start.items()}
         scales: dict[str, Vector] = {}
         symmetric = system.symmetric
         for step in range(self.max_refinements + 1):
@@ -687,15 +693,17 @@ class Subdomains:
             flat = np.concatenate([residual[k] for k in self.slices])
             delta, iterations, reason = self._krylov(-flat, weights, symmetric, increments, b)
             result.krylov_iterations.append(iterations)
-            if reason == PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
-                self._stopped = {k: increments[k] + delta[s] for k, s in self.slices.items()}
             if reason < 0:
                 result.applications = self._applications
+                stopped = reason == PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT
                 raise SubdomainConvergenceError(
                     f"interface {'CG' if symmetric else 'GMRES'} ({self.corrector.name} "
                     f"preconditioner) failed: PETSc reason {reason} after {iterations} "
                     f"iterations (relative master residuals {_short(result.history)})",
                     result,
+                    {k: increments[k] + delta[s] for k, s in self.slices.items()}
+                    if stopped
+                    else None,
                 )
             for k, s in self.slices.items():
                 increments[k] = increments[k] + delta[s]
