@@ -48,25 +48,26 @@ Entries = tuple[npt.NDArray, npt.NDArray, npt.NDArray]  # rows, columns, values
 
 
 def _body_entries(
-    system: System, layout: Layout, name: str, keep: npt.NDArray | None = None
+    system: System, layout: Layout, name: str, place: npt.NDArray | None = None
 ) -> tuple[list[Entries], list[Entries]]:
     """A body's entries of the merged matrix, global indices, zeros included.
 
     Returns its rows on this rank (``A``, and ``B_k P_k`` to the masters), and its share of
     the master rows (``P_kᵀ C_k``, and ``P_kᵀ D_k P_k`` on the active masters; identity
-    halves on an insulating channel's), given by the body's first rank only. With ``keep``
-    (sorted global indices), only the entries whose row and column are in it, its rows
-    chosen before the body's entries are expanded to triples.
+    halves on an insulating channel's), given by the body's first rank only. With ``place``
+    (each global index's place among the kept ones, -1 where not kept), only the entries
+    whose row and column are kept, renumbered, the rows chosen before the body's entries
+    are expanded to triples.
     """
     body = system.bodies[name]
     indptr, indices, data = body.whole_matrix().getValuesCSR()
     first_row = layout.mine + system.slices[name].start
     counts = np.diff(indptr)
-    if keep is None:
+    if place is None:
         rows = [(first_row + np.repeat(np.arange(body.size), counts),
                  layout.body(name, indices), data)]  # fmt: skip
     else:
-        picked = np.isin(first_row + np.arange(body.size), keep)
+        picked = place[first_row + np.arange(body.size)] >= 0
         entries = np.repeat(picked, counts)
         rows = [(first_row + np.repeat(np.flatnonzero(picked), counts[picked]),
                  layout.body(name, indices[entries]), data[entries])]  # fmt: skip
@@ -95,17 +96,18 @@ def _body_entries(
                 masters.append((at + D.row[both], at + D.col[both], D.data[both]))
             idle = np.flatnonzero(~active)
             masters.append((at + idle, at + idle, np.full(idle.size, 0.5)))
-    if keep is not None:
-        rows, masters = _restricted(rows, keep), _restricted(masters, keep)
+    if place is not None:
+        rows, masters = _restricted(rows, place), _restricted(masters, place)
     return rows, masters
 
 
-def _restricted(parts: list[Entries], keep: npt.NDArray) -> list[Entries]:
-    """The entries whose row and column are in ``keep``, renumbered to their places in it."""
+def _restricted(parts: list[Entries], place: npt.NDArray) -> list[Entries]:
+    """The entries whose row and column are kept, renumbered to their places."""
     out = []
     for r, c, v in parts:
-        inside = np.isin(r, keep) & np.isin(c, keep)
-        out.append((np.searchsorted(keep, r[inside]), np.searchsorted(keep, c[inside]), v[inside]))
+        pr, pc = place[r], place[c]
+        inside = (pr >= 0) & (pc >= 0)
+        out.append((pr[inside], pc[inside], v[inside]))
     return out
 
 
@@ -148,10 +150,17 @@ def merged_matrix(system: System, rows: npt.NDArray | None = None) -> PETSc.Mat:
     set, 6.1 to 11.4 GiB, for a strip of 228k of its rows).
     """
     comm, layout = system.comm, Layout(system)
-    keep = None if rows is None else np.concatenate(comm.allgather(np.asarray(rows, np.int64)))
+    keep, place = None, None
+    if rows is not None:
+        keep = np.concatenate(comm.allgather(np.asarray(rows, np.int64)))
+        if keep.size == layout.size:  # every row (bodies thin or small): the whole, as numbered
+            keep = rows = None
+        else:  # each entry's place by a lookup, not by searching the kept rows
+            place = np.full(layout.size, -1, dtype=np.int64)
+            place[keep] = np.arange(keep.size)
     entries, masters = [], []
     for name in system.bodies:
-        body_rows, body_masters = _body_entries(system, layout, name, keep)
+        body_rows, body_masters = _body_entries(system, layout, name, place)
         entries += body_rows
         masters += body_masters
     gathered = comm.gather(masters, root=0)

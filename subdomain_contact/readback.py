@@ -32,7 +32,7 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.laws import antiderivative
-from subdomain_contact.physics import FIELD_OF, Displacement, split_fields
+from subdomain_contact.physics import FIELD_OF, Displacement
 from subdomain_contact.system import System
 
 __all__ = [
@@ -125,7 +125,7 @@ def average(system: System, group: str, field: str) -> float:
         ds = body.forms.ds(tag)
         one = dolfinx.fem.Constant(body.forms.W.mesh, 1.0)
         forms = (
-            body.compiled(("mean", group, field), _fields(body)[field] * ds),
+            body.compiled(("mean", group, field), body.forms.parts()[field] * ds),
             body.compiled(("measure", group), one * ds),
         )
         local = np.array([dolfinx.fem.assemble_scalar(f) for f in forms])
@@ -355,10 +355,6 @@ def _dofs(body: Body, field: str, component: int | None) -> npt.NDArray[np.int32
     return parent_of[parent_of < body.size]
 
 
-def _fields(body: Body) -> dict[str, ufl.core.expr.Expr]:
-    return split_fields(body.forms.U, body.forms.fields)
-
-
 def _assembled(body: Body, key: Hashable, form: ufl.Form) -> Vector:
     """One of the body's vector forms (compiled once, kept under ``key``), owned and ghosts."""
     b = dolfinx.fem.petsc.assemble_vector(body.compiled(key, form))
@@ -441,7 +437,7 @@ def _sides(system: System, interfaces: list[str] | None = None) -> dict[str, dic
                 continue
             layer = body.layers[k]
             ds = body.forms.ds(body.forms.tags[k])
-            v = split_fields(ufl.TestFunction(body.forms.W), body.forms.fields)
+            v = body.forms.parts(test=True)
             first = v[body.forms.fields[0]]  # any field: each channel has the same nodes
             first = first if first.ufl_shape == () else first[0]
             area = body.compiled(("area", k), first * ds)
@@ -526,7 +522,7 @@ def enthalpy(system: System, reference: float = 0.0) -> float:
         m = system.problem.materials[name]
         if m.density is None:
             continue
-        T = _fields(body)["temperature"]
+        T = body.forms.parts()["temperature"]
         content = antiderivative(m.heat_capacity, T) - antiderivative(
             m.heat_capacity, ufl.as_ufl(float(reference))
         )
