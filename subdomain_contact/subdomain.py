@@ -693,6 +693,8 @@ class Subdomains:
             flat = np.concatenate([residual[k] for k in self.slices])
             delta, iterations, reason = self._krylov(-flat, weights, symmetric, increments, b)
             result.krylov_iterations.append(iterations)
+            for k, s in self.slices.items():
+                increments[k] = increments[k] + delta[s]
             if reason < 0:
                 result.applications = self._applications
                 stopped = reason == PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT
@@ -701,12 +703,8 @@ class Subdomains:
                     f"preconditioner) failed: PETSc reason {reason} after {iterations} "
                     f"iterations (relative master residuals {_short(result.history)})",
                     result,
-                    {k: increments[k] + delta[s] for k, s in self.slices.items()}
-                    if stopped
-                    else None,
+                    increments if stopped else None,
                 )
-            for k, s in self.slices.items():
-                increments[k] = increments[k] + delta[s]
         result.applications = self._applications
         reached = (
             f" (reached: {_describe(Tolerance(atol=system.master_field_norms(measured)))}"
