@@ -20,6 +20,13 @@ h ≥ 1e8, where the merged matrix's round-off (eps · h) leaves even the refine
 ``T(h) = T∞ + a/h + O(1/h²)``): on 19k DOFs it agrees with the series subdomain solve at
 1e10 to 6.7e-11, the refined MUMPS solve at 1e10 to 1.1e-8.
 
+Where MUMPS does not fit (``--mumps-estimate`` prints its own estimate of the memory it
+needs, from its analysis alone), ``--iterative-reference`` makes T_ref the iterative route
+itself solved to ``rtol`` 1e-13 (3e-13 where its true residual stops above 1e-13, at the
+stiff links): on 107,608 DOFs that solve is 4e-15 to 6e-15 from the refined MUMPS solve at
+h ≤ 1e3, and the timed solves' own ``rtol`` 1e-12 is 2e-14 to 2e-11 from it; the monolithic
+CG + GAMG solves, timed against it, check it independently where they converge.
+
 Run ``./dev python benchmarks/bench_3d_iterative.py`` (``--sizes`` element sizes [m]:
 0.0068 → 106k DOFs, 0.0047 → 317k, 0.0032 → 1.0M; ``--ranks 1 2``; ``--skip MUMPS`` where it
 does not fit). Prints the table and writes ``out_bench_3d_iterative.json``. Not a test:
@@ -41,7 +48,9 @@ CONDUCTANCES = (1e-2, 1.0, 1e3, 1e6, 1e10)
 METHODS = ("subdomain iterative", "subdomain direct", "MUMPS", "CG + GAMG")
 
 
-def worker(method: str, size: float, reference: Path | None, out: Path) -> None:
+def worker(
+    method: str, size: float, reference: Path | None, out: Path, conductances: list[float]
+) -> None:
     """One method at every h on this run's ranks; the reference run writes ``reference``."""
     import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
     from mpi4py import MPI
@@ -55,7 +64,13 @@ def worker(method: str, size: float, reference: Path | None, out: Path) -> None:
     placement = "shared" if method in ("MUMPS", "CG + GAMG", "reference") else "auto"
     scene = blocks3d_scene(size, placement=placement)
     rows = []
-    for h in CONDUCTANCES:
+    if method == "iterative reference":
+        for h in conductances:
+            iterative_reference(scene, h, f"{reference}_{h:g}.npz")
+        if comm.rank == 0:
+            out.write_text("[]")
+        return
+    for h in conductances:
         solver = {
             "reference": lambda: sc.Monolithic(refine=2),
             "MUMPS": lambda: sc.Monolithic(),
@@ -117,6 +132,57 @@ def richardson(scene, h: float, path: str) -> None:
     extrapolated_in_conductance(solve, h, RICHARDSON_FROM).save(path)
 
 
+#: The iterative reference's tolerances, tightest first: its true residual stops near 1.3e-13
+#: at h ≥ 1e6 on 107,608 DOFs (round-off of the bodies' reactions).
+REFERENCE_RTOLS = (1e-13, 3e-13)
+
+
+def iterative_reference(scene, h: float, path: str) -> None:
+    """The reference where MUMPS does not fit: the iterative route at the tightest tolerance."""
+    from mpi4py import MPI
+
+    import subdomain_contact as sc
+    from verification.cases import heated_blocks
+    from verification.nodal import NodalReference, field_values
+
+    for rtol in REFERENCE_RTOLS:
+        try:
+            with sc.System(heated_blocks(scene, h=h), solver="iterative") as s:
+                sc.solve(s, sc.Subdomains(), rtol=rtol)
+                NodalReference(*field_values(s)).save(path)
+        except sc.NewtonConvergenceError:
+            continue
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"reference at h = {h:g}: the iterative route to rtol {rtol:g}", flush=True)
+        return
+    raise RuntimeError(f"no iterative reference at h = {h:g} to rtol {REFERENCE_RTOLS[-1]:g}")
+
+
+def mumps_estimate(size: float) -> None:
+    """Print MUMPS's estimate of the monolithic factorisation's memory [GiB], no solve."""
+    from mpi4py import MPI
+
+    import subdomain_contact as sc
+    from verification.cases import blocks3d_scene, heated_blocks
+
+    comm = MPI.COMM_WORLD
+    # ICNTL(23) = 1 MB: MUMPS analyses, then refuses the factorisation (INFOG(1) = -19)
+    monolithic = sc.Monolithic({**sc.DIRECT, "mat_mumps_icntl_23": "1"})
+    with sc.System(heated_blocks(blocks3d_scene(size, placement="shared"), h=1.0)) as system:
+        system.apply_conditions()
+        system.assemble_jacobian()
+        monolithic.setup(system)
+        factor = monolithic.ksp.getPC().getFactorMatrix()
+        status, largest, total = (factor.getMumpsInfog(i) for i in (1, 16, 17))
+        rows = monolithic.K.getSize()[0]
+        monolithic.destroy()
+    if comm.rank == 0:
+        gib = 1e6 / 2**30  # INFOG(16), INFOG(17) are in millions of bytes
+        print(f"size {size}: {rows} rows, {comm.size} ranks: MUMPS estimates {largest * gib:.2f}"
+              f" GiB on its largest rank, {total * gib:.2f} GiB in all (INFOG(1) = {status})",
+              flush=True)  # fmt: skip
+
+
 def cell(row: dict | None) -> str:
     """A method's time, its iterations and memory; its error where it missed the target."""
     if row is None:
@@ -139,7 +205,7 @@ def table(rows: list[dict]) -> str:
     for ranks, size, h in sorted(keys, key=lambda k: (k[0], -k[1], k[2])):
         mine = {r["method"]: r for r in rows if (r["ranks"], r["size"], r["h"]) == (ranks, size, h)}
         dofs = max(r["dofs"] for r in mine.values())
-        sub = mine["subdomain iterative"]["seconds"]
+        sub = mine.get("subdomain iterative", {"seconds": float("nan")})["seconds"]
         reached = [mine[m]["seconds"] for m in ("MUMPS", "CG + GAMG")
                    if m in mine and mine[m]["error"] <= TARGET]  # fmt: skip
         mumps = mine.get("MUMPS")
@@ -156,27 +222,62 @@ def main() -> None:
     parser.add_argument("--sizes", type=float, nargs="+", default=[0.0068, 0.0047])
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--skip", nargs="*", default=[], help="methods not run")
+    parser.add_argument(
+        "--conductances", type=float, nargs="+", default=list(CONDUCTANCES),
+        help="the contact conductances h [W/(m^2 K)]",
+    )  # fmt: skip
+    parser.add_argument(
+        "--only-at", nargs="*", default=[], metavar="METHOD=H,H",
+        help="run a method at these h only, e.g. 'MUMPS=1e6,1e10' (a long factorisation)",
+    )  # fmt: skip
     parser.add_argument("--worker", help="(internal) the method a worker runs")
     parser.add_argument("--size", type=float, help="(internal)")
     parser.add_argument("--reference", type=Path, help="(internal)")
     parser.add_argument("--out", type=Path, default=Path("out_bench_3d_iterative.json"))
+    parser.add_argument(
+        "--iterative-reference", action="store_true",
+        help="the reference by the iterative route to rtol 1e-13 (where MUMPS does not fit)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--keep-reference", action="store_true",
+        help="reuse the reference files of an earlier run of the same sizes",
+    )  # fmt: skip
+    parser.add_argument(
+        "--mumps-estimate", action="store_true",
+        help="no solve: MUMPS's estimate of the monolithic factorisation's memory",
+    )  # fmt: skip
     args = parser.parse_args()
+    if args.mumps_estimate:
+        import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
+
+        for size in args.sizes:
+            mumps_estimate(size)
+        return
     if args.worker:
-        worker(args.worker, args.size, args.reference, args.out)
+        worker(args.worker, args.size, args.reference, args.out, args.conductances)
         return
     venv = Path(sys.executable).parent
     rows = []
+
+    only = {m: [float(h) for h in hs.split(",")] for m, hs in (a.split("=") for a in args.only_at)}
 
     def launch(method: str, ranks: int, size: float) -> list[dict]:
         out = Path(f"out_bench_3d_iterative_{ranks}.json")
         command = [str(venv / "mpiexec"), "-n", str(ranks), sys.executable, __file__,
                    "--worker", method, "--size", str(size), "--out", str(out),
-                   "--reference", f"out_bench_3d_iterative_reference_{size:g}"]  # fmt: skip
+                   "--reference", f"out_bench_3d_iterative_reference_{size:g}",
+                   "--conductances", *map(str, only.get(method, args.conductances))]  # fmt: skip
         subprocess.run(command, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
         return json.loads(out.read_text())
 
     for size in args.sizes:
-        launch("reference", 1, size)
+        kept = f"out_bench_3d_iterative_reference_{size:g}"
+        if args.keep_reference and all(
+            Path(f"{kept}_{h:g}.npz").is_file() for h in args.conductances
+        ):
+            print(f"size {size:g}: the reference of an earlier run kept", flush=True)
+        else:
+            launch("iterative reference" if args.iterative_reference else "reference", 1, size)
         for ranks in args.ranks:
             for method in METHODS:
                 if method not in args.skip:
