@@ -96,8 +96,10 @@ def worker(
                 dofs = sum(v for k, v in s.num_dofs().items())
                 inner = result.inner[-1]
                 body_iterations = sum(i.body_iterations for i in result.inner)
+                fallbacks = result.fallbacks
         except RuntimeError as failure:  # a monolithic iterative solve that broke down
             seconds, error, dofs, inner, body_iterations = float("nan"), float("inf"), 0, None, 0
+            fallbacks = 0
             if comm.rank == 0:
                 print(f"{method}, h = {h:g}: {failure}", flush=True)
         if hasattr(solver, "destroy"):
@@ -108,7 +110,7 @@ def worker(
             "seconds": seconds, "error": error, "memory_gb": memory,
             "rounds": inner.rounds if inner else 0,
             "krylov": sum(inner.krylov_iterations) if inner else 0,
-            "body_iterations": body_iterations,
+            "body_iterations": body_iterations, "fallbacks": fallbacks,
         })  # fmt: skip
     if comm.rank == 0:
         out.write_text(json.dumps(rows))
@@ -191,6 +193,8 @@ def cell(row: dict | None) -> str:
         return "fails"
     its = f", {row['krylov']} its" if row["krylov"] else ""
     mark = "" if row["error"] <= TARGET else f" (error {row['error']:.0e})"
+    if row.get("fallbacks"):  # bodies whose Krylov solve failed, factorised by MUMPS
+        mark += f", {row['fallbacks']} bodies factorised"
     return f"{row['seconds']:.2f} s{its}, {row['memory_gb']:.2f} GB{mark}"
 
 
