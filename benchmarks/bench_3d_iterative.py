@@ -20,12 +20,14 @@ h ≥ 1e8, where the merged matrix's round-off (eps · h) leaves even the refine
 ``T(h) = T∞ + a/h + O(1/h²)``): on 19k DOFs it agrees with the series subdomain solve at
 1e10 to 6.7e-11, the refined MUMPS solve at 1e10 to 1.1e-8.
 
-Where MUMPS does not fit (``--mumps-estimate`` prints its own estimate of the memory it
-needs, from its analysis alone), ``--iterative-reference`` makes T_ref the iterative route
-itself solved to ``rtol`` 1e-13 (3e-13 where its true residual stops above 1e-13, at the
-stiff links): on 107,608 DOFs that solve is 4e-15 to 6e-15 from the refined MUMPS solve at
-h ≤ 1e3, and the timed solves' own ``rtol`` 1e-12 is 2e-14 to 2e-11 from it; the monolithic
-CG + GAMG solves, timed against it, check it independently where they converge.
+Where the refined MUMPS reference is out of reach (``--mumps-estimate`` prints MUMPS's own
+estimate of its memory, from its analysis alone: 0.76 GiB at 107,608 DOFs, 3.28 at 309,108,
+15.19 at 939,678; the reference needs seven factorisations), ``--iterative-reference`` makes
+T_ref the iterative route itself solved to ``rtol`` 1e-13 (3e-13 where its true residual
+stops above 1e-13, at h ≥ 1e6). On 107,608 DOFs that solve is 4e-15 to 5.5e-15 from the
+refined MUMPS solve at h ≤ 1e3, and the timed ``rtol`` 1e-12 is 2e-14 to 2.3e-11 from the
+refined MUMPS one at every h; the monolithic solves, timed against it, check it independently
+where they reach 1e-8.
 
 Run ``./dev python benchmarks/bench_3d_iterative.py`` (``--sizes`` element sizes [m]:
 0.0068 → 106k DOFs, 0.0047 → 317k, 0.0032 → 1.0M; ``--ranks 1 2``; ``--skip MUMPS`` where it
