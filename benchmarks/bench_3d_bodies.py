@@ -36,6 +36,7 @@ from mpi4py import MPI
 
 import subdomain_contact as sc
 from verification.cases import blocks_row_scene, squeezed_row
+from verification.memory import mumps_estimate as estimate
 from verification.memory import resident
 from verification.nodal import NodalReference, error_against, field_values
 
@@ -63,8 +64,6 @@ parser.add_argument(
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 placement = "groups" if comm.size > 1 else "shared"
-#: MUMPS's megabyte (10⁶ bytes, its INFOG(16) and INFOG(17)) in GiB.
-GIB = 1e6 / 2**30
 #: (field, component) pairs compared.
 FIELDS = [("temperature", None), ("potential", None)] + [("displacement", i) for i in range(3)]
 
@@ -92,26 +91,15 @@ def newton(scene, linear, reference=None, bodies="direct"):
 
 def mumps_estimate(size: float) -> None:
     """Print MUMPS's estimate of the monolithic factorisation at 300 K [GiB]."""
-    # ICNTL(23) = 1 MB: MUMPS analyses, then refuses the factorisation (INFOG(1) = -19)
-    monolithic = sc.Monolithic({**sc.DIRECT, "mat_mumps_icntl_23": "1"})
     scene = blocks_row_scene(args.count, size, comm=comm, placement="shared")
     tic = time.perf_counter()
     with sc.System(squeezed_row(scene)) as system:
         system.reset({"temperature": 300.0})
         system.apply_conditions()
         system.assemble_jacobian()
-        monolithic.setup(system)
-        factor = monolithic.ksp.getPC().getFactorMatrix()
-        status, largest, total = (factor.getMumpsInfog(i) for i in (1, 16, 17))
-        rows = monolithic.K.getSize()[0]
-        monolithic.destroy()
+        line = estimate(system)
     if comm.rank == 0:
-        print(
-            f"size {size}: {rows} rows, {comm.size} ranks: MUMPS estimates {largest * GIB:.2f} "
-            f"GiB on its largest rank, {total * GIB:.2f} GiB in all (INFOG(1) = {status}, "
-            f"{time.perf_counter() - tic:.0f} s)",
-            flush=True,
-        )
+        print(f"size {size}: {line} ({time.perf_counter() - tic:.0f} s)", flush=True)
 
 
 if args.mumps_estimate:

@@ -169,23 +169,14 @@ def mumps_estimate(size: float) -> None:
 
     import subdomain_contact as sc
     from verification.cases import blocks3d_scene, heated_blocks
+    from verification.memory import mumps_estimate as estimate
 
-    comm = MPI.COMM_WORLD
-    # ICNTL(23) = 1 MB: MUMPS analyses, then refuses the factorisation (INFOG(1) = -19)
-    monolithic = sc.Monolithic({**sc.DIRECT, "mat_mumps_icntl_23": "1"})
     with sc.System(heated_blocks(blocks3d_scene(size, placement="shared"), h=1.0)) as system:
         system.apply_conditions()
         system.assemble_jacobian()
-        monolithic.setup(system)
-        factor = monolithic.ksp.getPC().getFactorMatrix()
-        status, largest, total = (factor.getMumpsInfog(i) for i in (1, 16, 17))
-        rows = monolithic.K.getSize()[0]
-        monolithic.destroy()
-    if comm.rank == 0:
-        gib = 1e6 / 2**30  # INFOG(16), INFOG(17) are in millions of bytes
-        print(f"size {size}: {rows} rows, {comm.size} ranks: MUMPS estimates {largest * gib:.2f}"
-              f" GiB on its largest rank, {total * gib:.2f} GiB in all (INFOG(1) = {status})",
-              flush=True)  # fmt: skip
+        line = estimate(system)
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"size {size}: {line}", flush=True)
 
 
 def cell(row: dict | None) -> str:

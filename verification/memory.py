@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["resident"]
+__all__ = ["mumps_estimate", "resident"]
 
 
 def resident(what: str = "VmRSS") -> int:
@@ -18,3 +18,27 @@ def resident(what: str = "VmRSS") -> int:
     if what == "VmRSS":
         Path("/proc/self/clear_refs").write_text("5")
     return value
+
+
+def mumps_estimate(system) -> str:
+    """MUMPS's own estimate of the monolithic factorisation of ``system``'s assembled Jacobian.
+
+    MUMPS analyses the merged matrix, then refuses the factorisation (ICNTL(23) = 1 MB:
+    INFOG(1) = -19), so nothing of its size is allocated. Returns a line: rows, ranks, the
+    estimate on the largest rank and in all [GiB] (INFOG(16), INFOG(17): 10⁶ bytes).
+    """
+    import subdomain_contact as sc
+
+    monolithic = sc.Monolithic({**sc.DIRECT, "mat_mumps_icntl_23": "1"})
+    try:
+        monolithic.setup(system)
+        factor = monolithic.ksp.getPC().getFactorMatrix()
+        status, largest, total = (factor.getMumpsInfog(i) for i in (1, 16, 17))
+        rows = monolithic.K.getSize()[0]
+    finally:
+        monolithic.destroy()
+    gib = 1e6 / 2**30
+    return (
+        f"{rows} rows, {system.comm.size} ranks: MUMPS estimates {largest * gib:.2f} GiB on its"
+        f" largest rank, {total * gib:.2f} GiB in all (INFOG(1) = {status})"
+    )
