@@ -1,8 +1,12 @@
-"""The resident set of this process, for the benchmarks' memory figures (Linux)."""
+"""The benchmarks' memory figures: this process's resident set (Linux), MUMPS's estimate."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from subdomain_contact import System
 
 __all__ = ["mumps_estimate", "resident"]
 
@@ -20,7 +24,7 @@ def resident(what: str = "VmRSS") -> int:
     return value
 
 
-def mumps_estimate(system) -> str:
+def mumps_estimate(system: System) -> str:
     """MUMPS's own estimate of the monolithic factorisation of ``system``'s assembled Jacobian.
 
     MUMPS analyses the merged matrix, then refuses the factorisation (ICNTL(23) = 1 MB:
