@@ -101,8 +101,8 @@ def worker(
                 body_iterations = sum(i.body_iterations for i in result.inner)
                 fallbacks = result.fallbacks
         except RuntimeError as failure:  # a monolithic iterative solve that broke down
-            seconds, error, dofs, inner, body_iterations = float("nan"), float("inf"), 0, None, 0
-            fallbacks = 0
+            seconds, error, dofs, inner = float("nan"), float("inf"), 0, None
+            body_iterations = fallbacks = 0
             if comm.rank == 0:
                 print(f"{method}, h = {h:g}: {failure}", flush=True)
         if hasattr(solver, "destroy"):
@@ -215,6 +215,11 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def reference_stem(size: float) -> str:
+    """Where the reference of a size is written, ``<stem>_<h>.npz`` for each h."""
+    return f"out_bench_3d_iterative_reference_{size:g}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=float, nargs="+", default=[0.0068, 0.0047])
@@ -226,7 +231,7 @@ def main() -> None:
     )  # fmt: skip
     parser.add_argument(
         "--only-at", nargs="*", default=[], metavar="METHOD=H,H",
-        help="run a method at these h only, e.g. 'MUMPS=1e6,1e10' (a long factorisation)",
+        help="run a method at these h of --conductances only, e.g. 'MUMPS=1e6,1e10'",
     )  # fmt: skip
     parser.add_argument("--worker", help="(internal) the method a worker runs")
     parser.add_argument("--size", type=float, help="(internal)")
@@ -263,13 +268,13 @@ def main() -> None:
         out = Path(f"out_bench_3d_iterative_{ranks}.json")
         command = [str(venv / "mpiexec"), "-n", str(ranks), sys.executable, __file__,
                    "--worker", method, "--size", str(size), "--out", str(out),
-                   "--reference", f"out_bench_3d_iterative_reference_{size:g}",
+                   "--reference", reference_stem(size),
                    "--conductances", *map(str, only.get(method, args.conductances))]  # fmt: skip
         subprocess.run(command, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
         return json.loads(out.read_text())
 
     for size in args.sizes:
-        kept = f"out_bench_3d_iterative_reference_{size:g}"
+        kept = reference_stem(size)
         if args.keep_reference and all(
             Path(f"{kept}_{h:g}.npz").is_file() for h in args.conductances
         ):
