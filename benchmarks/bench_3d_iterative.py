@@ -33,7 +33,9 @@ reach 1e-8.
 Run ``./dev python benchmarks/bench_3d_iterative.py`` (``--sizes`` element sizes [m]:
 0.0068 → 106k DOFs, 0.0047 → 317k, 0.0032 → 1.0M; ``--ranks 1 2``; ``--skip MUMPS`` where it
 does not fit). Prints the table and writes ``out_bench_3d_iterative.json``. Not a test:
-compare ratios of one run, not seconds across runs.
+compare ratios of one run, not seconds across runs. The meshes gmsh makes are kept in
+``--mesh-cache`` (``out_bench_3d_iterative_meshes/``) and read back by every later launch
+(at 0.0032 m, gmsh's meshing took most of the 8 minutes of a launch).
 """
 
 from __future__ import annotations
@@ -52,7 +54,12 @@ METHODS = ("subdomain iterative", "subdomain direct", "MUMPS", "CG + GAMG")
 
 
 def worker(
-    method: str, size: float, reference: Path | None, out: Path, conductances: list[float]
+    method: str,
+    size: float,
+    reference: Path | None,
+    out: Path,
+    conductances: list[float],
+    mesh_cache: Path | None = None,
 ) -> None:
     """One method at every h on this run's ranks; the reference run writes ``reference``."""
     import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
@@ -65,7 +72,7 @@ def worker(
 
     comm = MPI.COMM_WORLD
     placement = "shared" if method in ("MUMPS", "CG + GAMG", "reference") else "auto"
-    scene = blocks3d_scene(size, placement=placement)
+    scene = blocks3d_scene(size, placement=placement, mesh_cache=mesh_cache)
     rows = []
     if method == "iterative reference":
         for h in conductances:
@@ -163,7 +170,7 @@ def iterative_reference(scene, h: float, path: str) -> None:
     raise RuntimeError(f"no iterative reference at h = {h:g} to rtol {REFERENCE_RTOLS[-1]:g}")
 
 
-def mumps_estimate(size: float) -> None:
+def mumps_estimate(size: float, mesh_cache: Path | None = None) -> None:
     """Print MUMPS's estimate of the monolithic factorisation's memory [GiB], no solve."""
     from mpi4py import MPI
 
@@ -171,7 +178,8 @@ def mumps_estimate(size: float) -> None:
     from verification.cases import blocks3d_scene, heated_blocks
     from verification.memory import mumps_estimate as estimate
 
-    with sc.System(heated_blocks(blocks3d_scene(size, placement="shared"), h=1.0)) as system:
+    scene = blocks3d_scene(size, placement="shared", mesh_cache=mesh_cache)
+    with sc.System(heated_blocks(scene, h=1.0)) as system:
         system.apply_conditions()
         system.assemble_jacobian()
         line = estimate(system)
@@ -238,6 +246,10 @@ def main() -> None:
     parser.add_argument("--reference", type=Path, help="(internal)")
     parser.add_argument("--out", type=Path, default=Path("out_bench_3d_iterative.json"))
     parser.add_argument(
+        "--mesh-cache", type=Path, default=Path("out_bench_3d_iterative_meshes"),
+        help="directory of the meshes gmsh made, read back by the next launch",
+    )  # fmt: skip
+    parser.add_argument(
         "--iterative-reference", action="store_true",
         help="the reference by the iterative route to rtol 1e-13 (where MUMPS does not fit)",
     )  # fmt: skip
@@ -254,10 +266,10 @@ def main() -> None:
         import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
 
         for size in args.sizes:
-            mumps_estimate(size)
+            mumps_estimate(size, args.mesh_cache)
         return
     if args.worker:
-        worker(args.worker, args.size, args.reference, args.out, args.conductances)
+        worker(args.worker, args.size, args.reference, args.out, args.conductances, args.mesh_cache)
         return
     venv = Path(sys.executable).parent
     rows = []
@@ -268,6 +280,7 @@ def main() -> None:
         out = Path(f"out_bench_3d_iterative_{ranks}.json")
         command = [str(venv / "mpiexec"), "-n", str(ranks), sys.executable, __file__,
                    "--worker", method, "--size", str(size), "--out", str(out),
+                   "--mesh-cache", str(args.mesh_cache),
                    "--reference", reference_stem(size),
                    "--conductances", *map(str, only.get(method, args.conductances))]  # fmt: skip
         subprocess.run(command, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})

@@ -12,7 +12,7 @@ import subdomain_contact as sc
 from subdomain_contact import scene as scene_module
 from subdomain_contact.scene import gather_rows, match_points
 from verification.analytic import TwoPlates
-from verification.cases import GEO, cathode_slot, cathode_slot_scene, two_plates
+from verification.cases import GEO, blocks3d_scene, cathode_slot, cathode_slot_scene, two_plates
 from verification.nodal import field_values, relative_nodal_error
 
 DATA = Path(__file__).parent / "data"
@@ -285,3 +285,40 @@ def test_bodies_with_large_condensations_are_spread_over_ranks():
     assert ranks == [0, 1] and len({owner[n] for n in heavy}) == 2
     load = [sum(w for n, w in work.items() if owner[n] == r) for r in (0, 1)]
     assert abs(load[0] - load[1]) <= max(work.values())
+
+
+def test_a_cached_mesh_is_the_mesh_gmsh_made(comm, tmp_path, monkeypatch):
+    """The second load reads the ``.msh`` file of the first, without meshing again."""
+    cache = Path(comm.bcast(str(tmp_path), root=0))  # one directory for every rank
+
+    def load(size: float):
+        return blocks3d_scene(size, comm=comm, mesh_cache=cache)
+
+    def described(scene):
+        out = {}
+        for name, body in scene.bodies.items():
+            points = body.mesh.geometry.x[: body.mesh.geometry.index_map().size_local]
+            points = np.concatenate(comm.allgather(points))
+            out[name] = (
+                body.mesh.topology.index_map(3).size_global,
+                points[np.lexsort(points.T)],
+                sorted(body.boundaries),
+            )
+        layer = scene.interfaces["contact"].master_mesh.topology.index_map(0).size_global
+        return out, layer
+
+    made = described(load(0.1))
+    assert len(list(cache.glob("blocks3d-*.msh"))) == 1
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("meshed again")
+
+    monkeypatch.setattr(scene_module.gmsh.model.mesh, "generate", refuse)
+    read, layer = described(load(0.1))
+    assert layer == made[1]
+    for name, (cells, points, boundaries) in made[0].items():
+        assert read[name][0] == cells and read[name][2] == boundaries
+        # the same nodes: written with 17 digits by gmsh's binary format, read back exactly
+        np.testing.assert_array_equal(read[name][1], points)
+    with pytest.raises(ValueError, match="meshed again"):  # other parameters: a new mesh
+        load(0.12)

@@ -155,7 +155,11 @@ def stack_scene(
 
 
 def blocks3d_scene(
-    size: float = 0.1, *, comm: MPI.Comm = MPI.COMM_WORLD, placement: str = "auto"
+    size: float = 0.1,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    placement: str = "auto",
+    mesh_cache: str | Path | None = None,
 ) -> Scene:
     """``geo/blocks3d.geo``: two 0.5 × 0.2 × 0.2 m blocks, tetrahedra of ``size`` [m]."""
     return load_scene(
@@ -165,6 +169,7 @@ def blocks3d_scene(
         parameters={"size": size},
         comm=comm,
         placement=placement,
+        mesh_cache=mesh_cache,
     )
 
 
