@@ -179,6 +179,31 @@ def test_sparse_strip_is_the_dense_strip_corrector_on_one_interface(comm, h):
             assert np.linalg.norm(a - b) <= 10 * EPS * loss * condition * np.linalg.norm(a)
 
 
+@pytest.mark.parametrize("shape", [(), (3,)])
+def test_a_strip_of_n_layers_is_n_node_planes_of_a_box(comm, shape):
+    """A box of 8 × 5 × 4 hexahedra, each cut into six tetrahedra: every tetrahedron spans
+    two neighbouring node planes, so n layers grown from the face x = 1 hold the n + 1
+    planes nearest to it, (n + 1) · 6 · 5 nodes (all 9 planes from n = 8 on), times the
+    block size. Serial and on 2 ranks, where the layers cross the ranks' boundaries."""
+    import basix.ufl
+    import dolfinx
+
+    mesh = dolfinx.mesh.create_box(
+        comm, [[0.0, 0.0, 0.0], [1.0, 0.5, 0.4]], [8, 5, 4], dolfinx.mesh.CellType.tetrahedron
+    )
+    element = basix.ufl.element("Lagrange", "tetrahedron", 1, shape=shape)
+    W = dolfinx.fem.functionspace(mesh, element)
+    bs = W.dofmap.index_map_bs
+    face = dolfinx.fem.locate_dofs_geometrical(W, lambda x: np.isclose(x[0], 1.0))
+    face = face[face < W.dofmap.index_map.size_local]
+    seeds = (bs * face[:, None] + np.arange(bs)).ravel().astype(np.int32)
+    for n in (0, 1, 2, 5, 8, 12):
+        strip = dofs_within_layers(W, seeds, n)
+        assert comm.allreduce(strip.size) == bs * min(n + 1, 9) * 6 * 5, n
+        planes = np.unique(np.round(W.tabulate_dof_coordinates()[strip // bs, 0] * 8))
+        assert np.all(planes >= 8 - n)  # none beyond the n-th plane
+
+
 def test_a_strip_limited_to_a_share_of_the_body_stops_at_a_whole_layer(comm):
     """``most`` keeps the most layers (at least one, at most ``layers``) whose DOFs are not
     more than ``most``: the unlimited strips of 1, 2, … layers are the truth (a 3D block, P1
