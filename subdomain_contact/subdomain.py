@@ -113,8 +113,9 @@ BODY_RTOL_FACTOR = 1e-2
 #: Inside the interface Krylov an operator application may be less exact as the residual
 #: falls (relaxed inexact Krylov, van den Eshof & Sleijpen 2004): the body solves of
 #: iteration j stop at ``RELAXATION / ‖W r_j‖`` (W: the weights that make the Krylov
-#: target ‖W r‖ ≤ ½), never looser than :data:`RELAXED_LOOSEST`; the true rounds that check
-#: the solution keep the tight tolerance.
+#: target ‖W r‖ ≤ ½), never looser than :data:`RELAXED_LOOSEST`, both divided by the
+#: heaviest error weight (:meth:`Subdomains._error_weights`); the true rounds that check the
+#: solution keep the tight tolerance.
 RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 
 #: The largest weight of a master's residual (:meth:`Subdomains._error_weights`): an open
@@ -124,8 +125,8 @@ RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 MAX_ERROR_WEIGHT = 1e12
 
 #: A kept (lagged) preconditioner is rebuilt after a solve that needed more than this many
-#: times the interface Krylov iterations of the last fresh solve, the first after a build
-#: that did not go on from a stopped solve (plus one).
+#: times the interface Krylov iterations of its reference solve (plus one): the first solve
+#: from zero after its build (a solve that went on from a stopped one is not counted).
 #: Rebuilding costs a factorisation of the strip and one application of ``S`` per coarse
 #: mode (up to 8 per body), each application a solve of every body the mode touches: on
 #: four 3D blocks with iterative bodies (T, φ, u) that was 3.9 s per Newton step against
@@ -154,13 +155,12 @@ class Subdomains:
             cost iterative body solves) from one set-up to the next (Newton steps, time
             steps) while it serves: it is rebuilt when the active master DOFs change, and
             at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
-            iterations of the last fresh solve (the first after a build that did not go on
-            from a stopped one), the stopped solve then going on from its iterate with the
-            new build, unless its strip's new
-            factorisation would not fit in the memory left (kept then, and counted in
-            ``kept_for_memory``; where a rebuild is needed, a ``MemoryError`` says so before
-            the system kills a rank). It only preconditions: the true
-            rounds use the current bodies. With factorised bodies the rebuild costs less
+            iterations of its reference solve (the first from zero after the build), the
+            stopped solve then going on from its iterate with the new build, unless its
+            strip's new factorisation would not fit in the memory left (kept then, and
+            counted in ``kept_for_memory``; where a rebuild is needed, a ``MemoryError``
+            says so before the system kills a rank). It only preconditions: the true rounds
+            use the current bodies. With factorised bodies the rebuild costs less
             than the rounds and iterations a kept one adds (the collector bar slot at 17k
             DOFs, 18 Newton steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D
             blocks at 31k DOFs: 25.6 s and 29.2 s; the slot nested to 174,240 DOFs, 2
@@ -632,7 +632,7 @@ class Subdomains:
 
     def _solve_krylov_lagged(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         """The interface Krylov solve; with a kept preconditioner, rebuilt if it fails or slows."""
-        before = 0
+        before, continued = 0, False
         try:
             y = self._solve_krylov(b, tolerance, result)
         except SubdomainConvergenceError as error:
@@ -640,17 +640,20 @@ class Subdomains:
                 raise
             before = len(result.krylov_iterations)
             slowed = self._iteration_limit() < self.max_rounds  # it stopped at the limit
-            reference = self._built["iterations"]
             if not (slowed and not self._room_for_strip()):
                 self._build_preconditioner()  # for the current bodies, then once more
-                if error.iterate is not None:  # a continued solve is no fresh solve's count
-                    self._built["iterations"] = reference
+                # A solve that goes on from a stopped one with the new build is not the
+                # build's reference count (it started part-converged) nor its judge (a build
+                # just made is not stale): the next solve from zero sets the reference.
+                continued = error.iterate is not None
             # A solve stopped at the limit goes on from where it stopped, not from zero: on
             # the collector bar slot its iterations had cut the residual by 2 to 6 orders of
             # magnitude (docs/iterative_bodies.md, a stale preconditioner).
             y = self._solve_krylov(b, tolerance, result, error.iterate)
         built, iterations = self._built, sum(result.krylov_iterations[before:])
-        if built["iterations"] is None:
+        if continued:
+            pass
+        elif built["iterations"] is None:
             built["iterations"] = iterations
         elif iterations > LAG_GROWTH * built["iterations"] + 1:
             built["stale"] = True
@@ -773,9 +776,17 @@ class Subdomains:
         ksp.getPC().setPythonContext(_Preconditioner(self, weights))
         ksp.setTolerances(rtol=0.0, atol=0.5, max_it=self._iteration_limit())
         if any(body.iterative for body in system.bodies.values()):
+            # A body solve's error is relative to its own norm, blind to the error weights:
+            # at a master weighed w it counts w times in ‖W r‖, so the relaxation is divided
+            # by the heaviest weight (on the row of four 3D blocks the weights of 1e11 at the
+            # cold start, open contacts, made the true rounds miss what the Krylov solve had
+            # met under the relaxation, five times in a row, then a rebuild).
+            heaviest = max(
+                (w.max(initial=1.0) for w in (self.error_weights or {}).values()), default=1.0
+            )
 
             def relax(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
-                loose = min(RELAXED_LOOSEST, RELAXATION / max(norm, 1e-300))
+                loose = min(RELAXED_LOOSEST, RELAXATION / max(norm, 1e-300)) / heaviest
                 self._tighten(max(self._body_rtol, loose))
 
             ksp.setMonitor(relax)
