@@ -249,11 +249,10 @@ def test_a_krylov_solve_stopped_by_a_stale_preconditioner_goes_on_from_its_itera
     linear = sc.Subdomains()
     monolithic, result, errors, _ = row_against_monolithic(comm, linear)
     continued = [start for start in starts if start is not None]
-    # every other Newton step stops its first solve at the limit of one iteration: the
-    # continued solve, which started part-converged, neither sets the new build's reference
-    # nor marks it stale, so the next set-up keeps the build without a limit and sets the
-    # reference from zero, and the step after is stopped again (measured: 7 stopped solves
-    # in 13 Newton steps)
+    # Newton steps stop their first solve at the limit of one iteration: the continued
+    # solve, which started part-converged, does not mark the build it has just made stale,
+    # so the next set-up keeps it, and a solve that needs more than one iteration with it
+    # is stopped again (measured: 7 stopped solves in 13 Newton steps)
     assert len(continued) >= (result.iterations - 1) // 2 >= 1
     # one build at the first set-up and one per stopped solve, none besides: a continued
     # solve that had marked its new build stale would have built it again at the next set-up
