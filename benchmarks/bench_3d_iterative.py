@@ -14,9 +14,9 @@ placement (``"auto"``: a block per rank on two ranks). Until 2026-11-29 the mono
 solvers ran with each block spread over every rank (``"shared"``), which made CG + GAMG 1.6
 times slower on two ranks (107,608 DOFs: 1.83–2.14 s against 1.19–1.36 s at h = 1 and 1e3)
 and left MUMPS as it was (3.4–4.3 s either way): the two-rank ratios measured before were
-against a slow baseline. "Memory" is the peak
-resident set of a solve above the resident set before it (Linux: the peak is reset before
-each solve through ``/proc/self/clear_refs``), the largest over the ranks and the h values.
+against a slow baseline. "Memory" is the peak resident set of a solve above the resident set
+before it (Linux: the peak is reset before each solve through ``/proc/self/clear_refs``), the
+largest over the ranks and the h values.
 Times run from the assembly of the bodies (``sc.System``) to the solution, the mesh made
 outside the clock. Error: max nodal |T − T_ref| / range of
 T_ref, T_ref the MUMPS solve polished by two steps of iterative refinement (on one rank). For

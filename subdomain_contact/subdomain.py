@@ -156,16 +156,16 @@ class Subdomains:
             steps) while it serves: it is rebuilt when the active master DOFs change, and
             at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
             iterations of its reference solve (the first after the build), the stopped
-            solve then going on from its iterate with the new build, unless its
-            strip's new factorisation would not fit in the memory left (kept then, and
-            counted in ``kept_for_memory``; where a rebuild is needed, a ``MemoryError``
-            says so before the system kills a rank). It only preconditions: the true rounds
-            use the current bodies. With factorised bodies the rebuild costs less
-            than the rounds and iterations a kept one adds (the collector bar slot at 17k
-            DOFs, 18 Newton steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D
-            blocks at 31k DOFs: 25.6 s and 29.2 s; the slot nested to 174,240 DOFs, 2
-            ranks: 486.3 s and 530.5 s, 3 strip factorisations saved and 5 rounds added),
-            so there it is rebuilt every time.
+            solve then going on from its iterate with the new build, unless its strip's new
+            factorisation would not fit in the memory left (kept then, and counted in
+            ``kept_for_memory``; where a rebuild is needed, a ``MemoryError`` says so before
+            the system kills a rank). It only preconditions: the true rounds use the current
+            bodies. With factorised bodies the rebuild costs less than the rounds and
+            iterations a kept one adds (the collector bar slot at 17k DOFs, 18 Newton
+            steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D blocks at 31k DOFs:
+            25.6 s and 29.2 s; the slot nested to 174,240 DOFs, 2 ranks: 486.3 s and
+            530.5 s, 3 strip factorisations saved and 5 rounds added), so there it is
+            rebuilt every time.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body condensed on its contact DOFs
             forms it (from its Schur block, or a thin body by multi-column solves), and
