@@ -124,6 +124,11 @@ RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 #: master's target below round-off.
 MAX_ERROR_WEIGHT = 1e12
 
+#: Singular values of a body's rows of the coarse basis (orthonormal columns, so σ ≤ 1)
+#: below this add no body solve to the coarse matrix (:meth:`Subdomains._image`): what they
+#: drop is below the error of the body solves (``BODY_RTOL_FACTOR`` × 1e-10 at the tightest).
+COARSE_RANK = 1e-12
+
 #: A kept (lagged) preconditioner is rebuilt after a solve that needed more than this many
 #: times the interface Krylov iterations of its reference solve (plus one): the first solve
 #: after its build (one that went on from a stopped solve counts at least the old reference).
@@ -352,7 +357,7 @@ class Subdomains:
         self.coarse_basis = self._coarse_basis() if self.coarse else np.zeros((self.size, 0))
         self.coarse_matrix = self.coarse_image = None
         if self.coarse_basis.size:
-            self.coarse_image = np.column_stack([self.apply(z) for z in self.coarse_basis.T])
+            self.coarse_image = self._image(self.coarse_basis)
             self.coarse_matrix = self.coarse_basis.T @ self.coarse_image
 
     def _dense(self, body) -> bool:
@@ -548,6 +553,45 @@ class Subdomains:
         total = system.total(local)
         out = np.concatenate([total[k] for k in self.slices])
         return np.where(self.active, out, v)
+
+    def _image(self, Z: Matrix) -> Matrix:
+        """``S Z`` for orthonormal columns Z (identity on inactive DOFs), as :meth:`apply`.
+
+        Body α's part depends on Z's rows on its masters alone, ``Z_α = P Σ Qᵀ`` (SVD):
+        ``S^α Z_α = (S^α P) Σ Qᵀ``, one body solve per singular value above
+        :data:`COARSE_RANK` (``σ ≤ 1``: the part dropped is below the body solves' own
+        error). The columns of Z mix every body's modes, so applied one by one each made
+        every body solve: on the row of four 3D blocks (T, φ, u; 15 columns, five modes on
+        each contact) 4 × 15 body solves per build, against 5 + 10 + 10 + 5 here; at 74,580
+        DOFs on 2 ranks a build took 6.0–8.9 s, now 2.9–4.5 s.
+        """
+        system, columns = self.system, Z.shape[1]
+        local = {k: np.zeros((s.stop - s.start, columns)) for k, s in self.slices.items()}
+
+        def respond() -> None:
+            for name, body in system.bodies.items():
+                own = list(body.layers)
+                part = np.vstack([Z[self.slices[k]] for k in own])
+                if name in self.dense:
+                    response = self.dense[name] @ part
+                    for k, at in body.master_slices().items():
+                        local[k] += response[at]
+                    continue
+                P, sigma, Qt = np.linalg.svd(part, full_matrices=False)
+                rank = int(np.sum(sigma > COARSE_RANK))
+                if rank == 0:  # S^α 0 = 0: no body solve
+                    continue
+                ends = np.cumsum([0] + [self.slices[k].stop - self.slices[k].start for k in own])
+                basis = {k: P[ends[i] : ends[i + 1], :rank] for i, k in enumerate(own)}
+                mix = sigma[:rank, None] * Qt[:rank]
+                for k, r in body.respond(basis).items():
+                    local[k] += r @ mix
+                self._applications += rank
+
+        together(system.comm, respond)
+        total = system.total(local)
+        out = np.vstack([total[k] for k in self.slices])
+        return np.where(self.active[:, None], out, Z)
 
     def correct(self, r: Vector) -> Vector:
         """``G r``: the corrector on every interface (concatenated master vectors)."""
