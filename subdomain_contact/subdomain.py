@@ -571,6 +571,8 @@ class Subdomains:
         def respond() -> None:
             for name, body in system.bodies.items():
                 own = list(body.layers)
+                if not own:
+                    continue
                 part = np.vstack([Z[self.slices[k]] for k in own])
                 if name in self.dense:
                     response = self.dense[name] @ part
@@ -578,7 +580,8 @@ class Subdomains:
                         local[k] += response[at]
                     continue
                 P, sigma, Qt = np.linalg.svd(part, full_matrices=False)
-                rank = int(np.sum(sigma > COARSE_RANK))
+                # one count on the body's ranks, whose solves are collective
+                rank = body.comm.bcast(int(np.sum(sigma > COARSE_RANK)))
                 if rank == 0:  # S^α 0 = 0: no body solve
                     continue
                 ends = np.cumsum([0] + [self.slices[k].stop - self.slices[k].start for k in own])
