@@ -255,6 +255,46 @@ def test_the_coarse_image_solves_each_body_once_per_mode_on_its_masters(comm):
     assert np.abs(image - columns).max() <= 1e-12 * np.abs(columns).max()
 
 
+def test_the_coarse_matrix_is_built_at_the_krylov_solves_loosest_body_tolerance(comm):
+    """The coarse matrix preconditions: its body solves run at the interface Krylov's
+    loosest applications (``RELAXED_LOOSEST`` over the heaviest error weight, never tighter
+    than the true rounds), whatever tolerance the last solve left (a true round's 1e-12
+    made one build at 219k DOFs cost 3,349 body iterations against about 450); the true
+    rounds' tolerance is set again after it."""
+    problem = squeezed_row(blocks_row_scene(4, 0.05, comm=comm))
+    with sc.System(problem, solver="iterative") as system:
+        system.reset({"temperature": 300.0})
+        system.apply_conditions()
+        system.assemble_jacobian()
+        linear = sc.Subdomains()
+        linear.setup(system)
+        image, tight = linear._image, linear._body_rtol
+
+        def build(left: float) -> list[float]:
+            seen = []
+
+            def recording(Z):
+                seen.extend(body.ksp.getTolerances()[0] for body in system.bodies.values())
+                return image(Z)
+
+            linear._image = recording
+            linear._tighten(left)
+            linear._build_coarse()
+            after = [body.ksp.getTolerances()[0] for body in system.bodies.values()]
+            assert after == [tight] * len(after)
+            return seen
+
+        heaviest = linear._heaviest()
+        weighed = build(3e-7)  # as a relaxed Krylov solve leaves it
+        linear.error_weights = None
+        unweighed = build(tight)  # as a true round leaves it
+        linear.destroy()
+    # at 300 K the open contacts' masters weigh 1e11: 1e-4 / 1e11 is below the true rounds'
+    assert heaviest > subdomain_module.RELAXED_LOOSEST / tight
+    assert weighed and weighed == [tight] * len(weighed)
+    assert unweighed and unweighed == [subdomain_module.RELAXED_LOOSEST] * len(unweighed)
+
+
 def test_a_krylov_solve_stopped_by_a_stale_preconditioner_goes_on_from_its_iterate(
     comm, monkeypatch
 ):
