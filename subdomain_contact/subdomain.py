@@ -576,22 +576,21 @@ class Subdomains:
 
         def respond() -> None:
             for name, body in system.bodies.items():
-                own = list(body.layers)
-                if not own:
+                if not body.layers:
                     continue
-                part = np.vstack([Z[self.slices[k]] for k in own])
+                at = body.master_slices()  # where each interface sits in the body's rows
+                part = np.vstack([Z[self.slices[k]] for k in at])
                 if name in self.dense:
                     response = self.dense[name] @ part
-                    for k, at in body.master_slices().items():
-                        local[k] += response[at]
+                    for k, rows in at.items():
+                        local[k] += response[rows]
                     continue
                 P, sigma, Qt = np.linalg.svd(part, full_matrices=False)
                 # one count on the body's ranks, whose solves are collective
                 rank = body.comm.bcast(int(np.sum(sigma > COARSE_RANK)))
                 if rank == 0:  # S^α 0 = 0: no body solve
                     continue
-                ends = np.cumsum([0] + [self.slices[k].stop - self.slices[k].start for k in own])
-                basis = {k: P[ends[i] : ends[i + 1], :rank] for i, k in enumerate(own)}
+                basis = {k: P[rows, :rank] for k, rows in at.items()}
                 mix = sigma[:rank, None] * Qt[:rank]
                 for k, r in body.respond(basis).items():
                     local[k] += r @ mix
