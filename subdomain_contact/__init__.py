@@ -65,7 +65,7 @@ from subdomain_contact.readback import (
     voltage_drop,
 )
 from subdomain_contact.scene import Scene, load_scene
-from subdomain_contact.solvers import DIRECT
+from subdomain_contact.solvers import DIRECT, FIELDSPLIT_DIRECT, THERMOELECTRIC_MECHANICAL
 from subdomain_contact.subdomain import (
     InterfaceResult,
     SubdomainConvergenceError,
@@ -79,8 +79,10 @@ __all__ = [
     "BDDC",
     "CG_GAMG",
     "DIRECT",
+    "FIELDSPLIT_DIRECT",
     "FIELDSPLIT_GAMG",
     "MAX_TEMPERATURE_STEP",
+    "THERMOELECTRIC_MECHANICAL",
     "Contact",
     "Convection",
     "CurrentDensity",

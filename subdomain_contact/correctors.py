@@ -30,9 +30,13 @@ from petsc4py import PETSc
 
 from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, merged_matrix, same_pattern
+from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
+    SWEEP_DIRECT,
     destroy,
     factorise,
+    make_ksp,
+    ordered,
     refactorisation_shortfall,
     refuse_refactorisation,
 )
@@ -187,11 +191,17 @@ class SparseStrip:
     slot at 1.07M DOFs on 2 ranks: ten layers 436,675 rows and 10.6 GB of factors, which a
     second factorisation would not fit beside; one layer 228,455 rows and 3.49 GB (at 174k
     DOFs one layer took the same Newton path as ten in 0.80 of the time).
+
+    With ``split`` (the default), a strip of T or φ and u is solved by one sweep over (T, φ),
+    then u, each factorised (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): exact but for
+    the contacts' laws of the pressure, two factorisations of 2 and 3 unknowns a node in place
+    of one of 5.
     """
 
     layers: int = 10
     share: float = 0.25
     narrowest: int = 1
+    split: bool = True
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
 
@@ -205,7 +215,7 @@ class SparseStrip:
         if not 0.0 < self.share <= 1.0:
             raise ValueError(f"sparse strip corrector: share = {self.share}, not in (0, 1]")
         if operator is None:
-            operator = StripSolve(self.prefix, self.layers, self.share)
+            operator = StripSolve(self.prefix, self.layers, self.share, self.split)
         operator.update(system)
         if operator.layers > self.narrowest and operator.factorisations == 1:
             if not operator.fits():  # its next factorisation would not fit: narrower, once
@@ -219,8 +229,10 @@ class StripSolve:
     Call :meth:`destroy` (collectively) when done.
     """
 
-    def __init__(self, prefix: str, layers: int, share: float = 1.0) -> None:
-        self.prefix = prefix
+    def __init__(self, prefix: str, layers: int, share: float = 1.0, split: bool = False) -> None:
+        self.prefix, self.split = prefix, split
+        #: The split's row sets, where the strip is solved by a sweep over its fields
+        self.sets: list[tuple[str, PETSc.IS]] = []
         #: Element layers of each body's strip; ``share``: the largest part of an iterative
         #: body's DOFs in it
         self.layers, self.share = layers, share
@@ -270,20 +282,61 @@ class StripSolve:
             K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
             K.destroy()
         else:  # the first, or contacts changed the pattern
-            destroy(self.K, self.ksp)
-            self.K, self.ksp = K, None
-        ksp, self.ksp = self.ksp, None  # a failed factorisation is destroyed by factorise
-        dim, again = system.problem.scene.dim, not system.is_linear
-        self.ksp = factorise(
-            self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
-        )
+            destroy(self.K, self.ksp, *(iset for _, iset in self.sets))
+            self.K, self.ksp, self.sets = K, None, []
+        fields = system.problem.fields
+        if self.split and "displacement" in fields and len(fields) > 1:
+            self._sweep(system)
+        else:
+            ksp, self.ksp = self.ksp, None  # a failed factorisation is destroyed by factorise
+            dim, again = system.problem.scene.dim, not system.is_linear
+            self.ksp = factorise(
+                self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
+            )
         self.factorisations += 1
+
+    def _sweep(self, system: System) -> None:
+        """Set up the strip's solve as one sweep over (T, φ), then u, each factorised.
+
+        PETSc's ``fieldsplit`` (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): two
+        factorisations of 2 and 3 unknowns a node in place of one of 5, exact but for the
+        contacts' dependence on u (the interface Krylov takes the rest).
+        """
+        if self.ksp is None:
+            mine = self.comm.exscan(system.local_size) or 0  # None on rank 0
+            u = system.field_of[self.rows - mine] == FIELDS.index("displacement")
+            first = self.K.getOwnershipRange()[0]
+            self.sets = [
+                (
+                    name,
+                    PETSc.IS().createGeneral(
+                        (first + np.flatnonzero(rows)).astype(PETSc.IntType), comm=self.comm
+                    ),
+                )
+                for name, rows in (("thermoelectric", ~u), ("displacement", u))
+            ]
+            options = ordered(
+                SWEEP_DIRECT, system.problem.scene.dim, self.K.getSize()[0],
+                again=not system.is_linear,
+            )  # fmt: skip
+            self.ksp = make_ksp(self.K, self.prefix, options, splits=self.sets)
+        else:
+            self.ksp.setOperators(self.K)
+            self.ksp.setUp()
+        subs = self.ksp.getPC().getFieldSplitSubKSP()
+        for (name, _), sub in zip(self.sets, subs, strict=True):
+            sub.setUp()  # factorised now, not at the first solve: its memory is read next
+            reason = sub.getPC().getFailedReason()
+            if reason != 0:
+                raise RuntimeError(
+                    f"sparse strip corrector: factorisation of its {name} split failed (PETSc "
+                    f"PC reason {reason}); try SparseStrip(split=False)"
+                )
 
     def narrow(self, system: System, layers: int) -> None:
         """Free the strip and its factorisation, and make it again ``layers`` wide."""
         self.narrowed_from = self.narrowed_from or self.layers
-        destroy(self.K, self.ksp)
-        self.K = self.ksp = self.rows = None
+        self.destroy()
         self.layers = layers
         self.update(system)
 
@@ -308,8 +361,9 @@ class StripSolve:
 
     def destroy(self) -> None:
         """Free the matrix and its factorisation (collective)."""
-        destroy(self.K, self.ksp)
+        destroy(self.K, self.ksp, *(iset for _, iset in self.sets))
         self.K = self.ksp = self.rows = None
+        self.sets = []
 
 
 def dofs_within_layers(

@@ -11,7 +11,7 @@ balancing domain decomposition, PCBDDC, whose interface is then the master layer
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 
 import numpy as np
@@ -21,6 +21,7 @@ from petsc4py import PETSc
 
 from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
 from subdomain_contact.modes import centre, modes, span
+from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import DIRECT, destroy, make_ksp, ordered
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
@@ -100,6 +101,11 @@ class Monolithic:
             reference polished beyond the direct solve's round-off.
         inexact: An iterative solve stops where Newton's tolerance on every field's true
             residual is met (an inexact Newton), not at its ``ksp_rtol``.
+        splits: For a ``fieldsplit`` preconditioner, the fields of each split by its name
+            (its options under ``fieldsplit_<name>_``), in the order of the sweep, e.g.
+            :data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`; fields the problem
+            lacks are left out. Default: one split per field, named by it, in the problem's
+            order.
 
     Call :meth:`destroy` (collectively) when done.
     """
@@ -112,9 +118,11 @@ class Monolithic:
         monitor: Callable[[int, Callable[[], Vector]], None] | None = None,
         refine: int = 0,
         inexact: bool = False,
+        splits: Mapping[str, Sequence[str]] | None = None,
     ) -> None:
         self.options, self.prefix, self.monitor = options, prefix, monitor
         self.refine, self.inexact = refine, inexact
+        self.groups = None if splits is None else {k: tuple(v) for k, v in splits.items()}
         self.system: System | None = None
         self.splits: list[tuple[str, PETSc.IS]] = []
         self.K: PETSc.Mat | None = None
@@ -129,7 +137,22 @@ class Monolithic:
         return given == "bddc"
 
     def check(self, system: System) -> None:
-        """Refuse BDDC on a rank that holds part of a body (the merged matrix takes any)."""
+        """Refuse what cannot be solved, before any assembly.
+
+        BDDC on a rank that holds part of a body (the merged matrix takes any); a field split
+        that leaves a field out or puts it twice, or whose options name no split.
+        """
+        if self.options.get("pc_type") == "fieldsplit":
+            _groups(system.problem.fields, self.groups)  # each field in one split
+            names = set(self.groups or FIELDS)  # a preset may name fields the problem lacks
+            for key in self.options:
+                if key.startswith("fieldsplit_") and not any(
+                    key.startswith(f"fieldsplit_{name}_") for name in names
+                ):
+                    raise ValueError(
+                        f"monolithic field split: option {key} names none of the splits "
+                        f"{sorted(names)} (give them: Monolithic(splits=...))"
+                    )
         if self._bddc() and system.comm.allreduce(
             system.problem.scene.group_comm.size > 1, op=MPI.LOR
         ):
@@ -160,7 +183,7 @@ class Monolithic:
         dim, rows = system.problem.scene.dim, self.K.getSize()[0]
         options = ordered(self.options, dim, rows, again=not system.is_linear)
         if options.get("pc_type") == "fieldsplit":
-            self.splits = field_splits(system)
+            self.splits = field_splits(system, self.groups)
         self.ksp = make_ksp(self.K, self.prefix, options, splits=self.splits)
         self.factorisations += 1
         if self.monitor is not None:
@@ -225,16 +248,38 @@ class Monolithic:
         self.K, self.ksp, self.splits = None, None, []
 
 
-def field_splits(system: System) -> list[tuple[str, PETSc.IS]]:
-    """Each field's owned rows of the merged matrix (bodies', then masters'), ascending.
+def _groups(
+    fields: Sequence[str], splits: Mapping[str, Sequence[str]] | None
+) -> dict[str, tuple[str, ...]]:
+    """The splits' fields among ``fields`` (default one split per field); every field in one."""
+    if splits is None:
+        return {f: (f,) for f in fields}
+    groups = {k: tuple(f for f in v if f in fields) for k, v in splits.items()}
+    groups = {k: v for k, v in groups.items() if v}
+    placed = [f for v in groups.values() for f in v]
+    for f in fields:
+        if placed.count(f) != 1:
+            raise ValueError(
+                f"monolithic field split: field {f!r} is in {placed.count(f)} of the splits "
+                f"{dict(splits)} (each field in exactly one)"
+            )
+    return groups
 
-    The displacement's set carries the rigid motions of the whole as its near-null space,
-    which PCFIELDSPLIT hands to its block's GAMG; row by row (a contact may carry the
-    normal component alone, so the rows are not blocked by node). Destroy the sets when done.
+
+def field_splits(
+    system: System, splits: Mapping[str, Sequence[str]] | None = None
+) -> list[tuple[str, PETSc.IS]]:
+    """Each split's owned rows of the merged matrix (bodies', then masters'), ascending.
+
+    ``splits``: the fields of each split by its name (default: one split per field, named by
+    it). A split of the displacement alone carries the rigid motions of the whole as its
+    near-null space, which PCFIELDSPLIT hands to its block's GAMG; row by row (a contact may
+    carry the normal component alone, so the rows are not blocked by node). Destroy the sets
+    when done.
     """
     comm, dim = system.comm, system.problem.scene.dim
     start = comm.exscan(system.local_size) or 0  # None on rank 0
-    splits = []
+    by_field = {}
     for field in system.problem.fields:
         rows, points, components = [np.zeros(0, int)], [np.zeros((0, 3))], [np.zeros(0, int)]
         for name, body in system.bodies.items():
@@ -251,17 +296,19 @@ def field_splits(system: System) -> list[tuple[str, PETSc.IS]]:
                     points.append(layer.coordinates)
                     components.append(np.full(layer.nodes, component or 0))
             offset += layer.size
-        order = np.argsort(np.concatenate(rows))
-        iset = PETSc.IS().createGeneral(
-            np.concatenate(rows)[order].astype(PETSc.IntType), comm=comm
-        )
-        if field == "displacement":
-            at, of = np.concatenate(points)[order], np.concatenate(components)[order]
+        by_field[field] = (np.concatenate(rows), np.concatenate(points), np.concatenate(components))
+    made = []
+    for name, fields in _groups(system.problem.fields, splits).items():
+        rows = np.concatenate([by_field[f][0] for f in fields])
+        order = np.argsort(rows)
+        iset = PETSc.IS().createGeneral(rows[order].astype(PETSc.IntType), comm=comm)
+        if fields == ("displacement",):
+            at, of = by_field["displacement"][1][order], by_field["displacement"][2][order]
             space = _rigid_motions(comm, at, of, dim)
             iset.compose("nearnullspace", space)
             space.destroy()  # the set holds its reference
-        splits.append((field, iset))
-    return splits
+        made.append((name, iset))
+    return made
 
 
 def _rigid_motions(

@@ -37,6 +37,28 @@ def test_two_plates_scene(plates):
         assert body.mesh.topology.index_map(2).size_global == 16
 
 
+def test_a_refined_scene_is_nested_with_eight_times_the_cells(comm):
+    """``refinements``: every tetrahedron split in 8, every contact triangle in 4, every
+    vertex of the coarse mesh kept, the volumes the same; a negative count is refused."""
+    coarse, fine = (blocks3d_scene(0.1, comm=comm, refinements=k) for k in (0, 1))
+
+    def size(mesh, dim):
+        return mesh.topology.index_map(dim).size_global
+
+    for name, body in coarse.bodies.items():
+        refined = fine.bodies[name].mesh
+        assert size(refined, 3) == 8 * size(body.mesh, 3)
+        points = np.concatenate(comm.allgather(refined.geometry.x))
+        for x in comm.allgather(body.mesh.geometry.x):
+            distance = np.min(np.linalg.norm(x[:, None] - points[None], axis=2), axis=1)
+            assert np.all(distance < 1e-12)  # nested: each coarse vertex is a fine one
+    for name, interface in coarse.interfaces.items():
+        master = fine.interfaces[name].master_mesh
+        assert size(master, 2) == 4 * size(interface.master_mesh, 2)
+    with pytest.raises(ValueError, match=r"blocks3d.geo: refinements = -1, not a count"):
+        blocks3d_scene(0.1, comm=comm, refinements=-1)
+
+
 def test_interface_drawn_twice_is_accepted_when_conforming(comm):
     scene = load_split()
     problem = sc.Problem(

@@ -229,6 +229,81 @@ def test_coupled_newton_equals_monolithic_and_its_jacobian_is_exact(bars):
     assert min(min(o.values()) for o in orders) > 1.9, orders
 
 
+def coupling_rows(linear):
+    """Rows of T and φ where the merged matrix has a nonzero in a column of u (global count)."""
+    (_, te), (_, u) = linear.splits
+    block = linear.K.createSubMatrix(te, u)
+    indptr, _, values = block.getValuesCSR()
+    block.destroy()
+    row_of = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+    local = np.unique(row_of[np.abs(values) > 0]).size
+    return linear.K.getComm().tompi4py().allreduce(local)
+
+
+@pytest.mark.parametrize("laws_of_pressure", [True, False])
+def test_the_split_monolithic_solve_is_the_direct_one(bars, laws_of_pressure):
+    """``FIELDSPLIT_DIRECT``: GMRES on one sweep over (T, φ), then u, each block factorised.
+
+    T and φ see u only through the contact's laws of the pressure, u sees T everywhere
+    (expansion): the Jacobian is block lower triangular in that order but for the rows of T
+    and φ on the contacts. With constant conductances it is triangular, the sweep is its
+    inverse and GMRES (right-preconditioned) needs one iteration. With laws of p the
+    sweep is the identity but for a block of rank at most the count of those rows, so GMRES
+    ends within that count + 1 iterations (exact arithmetic). Newton then follows the direct
+    solve's path to the same solution.
+    """
+    problem = squeezed_joule_bars(bars)
+    if not laws_of_pressure:
+        constant = dataclasses.replace(
+            problem.contacts["contact"], conductance=5e3, electrical_conductance=1e4
+        )
+        problem = dataclasses.replace(problem, contacts={"contact": constant})
+    system = make_system(problem)
+    states, results = {}, {}
+    for name, linear in (
+        ("direct", sc.Monolithic()),
+        ("split", sc.Monolithic(sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL)),
+    ):
+        system.reset({"temperature": 300.0})
+        results[name] = sc.solve(system, linear, rtol=1e-12)
+        states[name] = system.state()
+        rows = coupling_rows(linear) if name == "split" else None
+        linear.destroy()
+    # both stop at rtol 1e-12 per field (as the subdomain and monolithic Newtons above)
+    assert max(system.difference(states["split"], states["direct"]).values()) < 1e-8
+    # GMRES's relative residual 1e-12 is below the forcing η ≤ 1e-8 of the subdomain route,
+    # whose Newton measure agrees with the direct one's to 1e-6 above 1e-10 (above)
+    split = results["split"].relative_residuals()
+    direct = results["direct"].relative_residuals()
+    assert len(split) == len(direct)
+    above = direct > 1e-10
+    assert np.all(np.abs(split - direct)[above] <= 1e-6 * direct[above])
+    iterations = [s.inner_rounds for s in results["split"].history[1:]]
+    # One iteration in exact arithmetic where the sweep is exact; a second where the step's
+    # right-hand side is small against the factorisations' round-off (measured: step 2, its
+    # right-hand side 5e2 against 2e6 to 2e8 at the others, 1.1e-11 of it left after the
+    # first, above GMRES's 1e-12). With laws of p: 1, 2, 3, 3, 3, 4, 4, 4, 4.
+    if laws_of_pressure:
+        assert rows > 0 and max(iterations) > 2, iterations  # the contact's rows do couple
+        assert max(iterations) <= rows + 1, (iterations, rows)
+    else:
+        assert rows == 0 and max(iterations) <= 2, iterations
+
+
+@pytest.mark.parametrize(
+    ("splits", "message"),
+    [
+        (None, "option fieldsplit_thermoelectric_ksp_type names none of the splits"),
+        ({"te": ("temperature", "potential")}, "field 'displacement' is in 0 of the splits"),
+    ],
+)
+def test_a_field_split_that_misses_a_field_or_a_split_is_refused(bars, splits, message):
+    system = make_system(squeezed_joule_bars(bars))
+    options = sc.FIELDSPLIT_DIRECT if splits is None else {"pc_type": "fieldsplit"}
+    with pytest.raises(ValueError, match=message):
+        sc.solve(system, sc.Monolithic(options, splits=splits))
+
+
 def test_method1_corrector_gives_the_same_answer_with_more_rounds(bars):
     # method 1 is the small-h corrector: soft contacts (h̄ ≈ k/Δx / 4, ḡ ≈ σ/Δx / 40)
     system = make_system(joule_problem(bars, h=10.0, g=1e3))

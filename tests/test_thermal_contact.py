@@ -183,8 +183,8 @@ def l2_error(system, exact) -> float:
     return float(np.sqrt(sums[0] / sums[1]))
 
 
-@pytest.mark.parametrize("dim", [2, 3])
-def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
+@pytest.mark.parametrize(("dim", "refined"), [(2, False), (3, False), (3, True)])
+def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim, refined):
     """Manufactured solution: the 1D solution plus a harmonic mode cos(κy) X(x) that crosses
     the contact (both of its conditions hold), imposed by functions of x on both ends
     (numpy in 2D, UFL in 3D).
@@ -193,6 +193,14 @@ def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
     the pre-asymptotic term O((κh)²) of the coarse pair (κh = 0.39 in 2D, 0.79 in 3D):
     measured 1.995 (2D) and 1.980 (3D), the same on 2 ranks; [1.8, 2.2] holds that term with
     a margin of 2 or more.
+
+    In 3D also on nested meshes (``load_scene(refinements=...)``): a mesh of 0.1 m refined
+    uniformly 1, 2 and 3 times, eight times the cells each. There the rate approaches 2 more
+    slowly: uniform refinement keeps the coarse mesh's worst shapes and adds flatter ones
+    (shape quality min 0.12, mean 0.43 for gmsh's mesh of 0.0125 m; 0.03, 0.36 for that of
+    0.025 m refined once). Measured 1.73, then 1.85 (from 0.05 m refined 0, 1, 2 times: 1.42,
+    then 1.61, at the same sizes of the finer pair). The meshes are gmsh's, the same on every
+    machine: the rates move by round-off only.
     """
     length, width = (1.0, 1.0) if dim == 2 else (0.5, 0.2)
     plates = TwoPlates(length, length, 1.0, 2.0, 10.0, 300.0, 320.0)
@@ -208,7 +216,11 @@ def test_dirichlet_data_of_x_converges_at_the_expected_rate(comm, dim):
         if dim == 2:
             scene = two_plates_scene(4 * refinement, 4 * refinement, comm=comm)
         else:
-            scene = blocks3d_scene(0.05 / refinement, comm=comm)
+            scene = (
+                blocks3d_scene(0.1, comm=comm, refinements=refinement.bit_length())
+                if refined
+                else blocks3d_scene(0.05 / refinement, comm=comm)
+            )
         bodies = list(scene.bodies)
         problem = sc.Problem(
             scene,

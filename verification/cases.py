@@ -160,8 +160,12 @@ def blocks3d_scene(
     comm: MPI.Comm = MPI.COMM_WORLD,
     placement: str = "auto",
     mesh_cache: str | Path | None = None,
+    refinements: int = 0,
 ) -> Scene:
-    """``geo/blocks3d.geo``: two 0.5 × 0.2 × 0.2 m blocks, tetrahedra of ``size`` [m]."""
+    """``geo/blocks3d.geo``: two 0.5 × 0.2 × 0.2 m blocks, tetrahedra of ``size`` [m].
+
+    ``refinements``: uniform refinements of that mesh (each halves the size).
+    """
     return load_scene(
         GEO / "blocks3d.geo",
         bodies=["block_A", "block_B"],
@@ -170,6 +174,7 @@ def blocks3d_scene(
         comm=comm,
         placement=placement,
         mesh_cache=mesh_cache,
+        refinements=refinements,
     )
 
 
