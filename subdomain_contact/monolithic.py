@@ -22,7 +22,7 @@ from petsc4py import PETSc
 from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
 from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import FIELDS
-from subdomain_contact.solvers import DIRECT, destroy, make_ksp, ordered
+from subdomain_contact.solvers import DIRECT, FIELD_SWEEP, destroy, make_ksp, ordered
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
 
@@ -52,15 +52,8 @@ CG_GAMG: Mapping[str, str] = MappingProxyType(
 #: near-null space (the constant; for u the rigid motions of the whole). The bodies' own split
 #: (``body.SPLIT``) on the merged matrix, contacts included.
 FIELDSPLIT_GAMG: Mapping[str, str] = MappingProxyType(
-    {
-        "ksp_type": "gmres",
-        "ksp_gmres_restart": "200",
-        "ksp_pc_side": "right",  # the true residual: rows in W, A and N
-        "ksp_rtol": "1e-12",
-        "ksp_max_it": "2000",
-        "pc_type": "fieldsplit",
-        "pc_fieldsplit_type": "multiplicative",
-    }
+    FIELD_SWEEP
+    | {"ksp_max_it": "2000"}
     | {
         f"fieldsplit_{f}_{k}": v
         for f in ("temperature", "potential", "displacement")

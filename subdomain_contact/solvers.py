@@ -13,6 +13,7 @@ __all__ = [
     "AMD_ROWS",
     "DIRECT",
     "FIELDSPLIT_DIRECT",
+    "FIELD_SWEEP",
     "REFACTORISATION_MARGIN",
     "SWEEP_DIRECT",
     "THERMOELECTRIC_MECHANICAL",
@@ -40,6 +41,21 @@ THERMOELECTRIC_MECHANICAL: Mapping[str, tuple[str, ...]] = MappingProxyType(
     {"thermoelectric": ("temperature", "potential"), "displacement": ("displacement",)}
 )
 
+#: GMRES (right-preconditioned: the true residual, rows in W, A and N) on one block
+#: Gauss-Seidel sweep over named splits (PETSc's multiplicative ``fieldsplit``): the frame of
+#: the field-split presets, to which each adds its splits' solves (``fieldsplit_<name>_``).
+FIELD_SWEEP: Mapping[str, str] = MappingProxyType(
+    {
+        "ksp_type": "gmres",
+        "ksp_gmres_restart": "200",
+        "ksp_pc_side": "right",
+        "ksp_rtol": "1e-12",
+        "ksp_max_it": "1000",
+        "pc_type": "fieldsplit",
+        "pc_fieldsplit_type": "multiplicative",
+    }
+)
+
 #: The coupled problem's monolithic solve by two smaller factorisations: GMRES preconditioned
 #: by one block Gauss-Seidel sweep over :data:`THERMOELECTRIC_MECHANICAL` (pass it as
 #: ``Monolithic(splits=...)``), each split's block factorised by MUMPS. The sweep is exact but
@@ -51,15 +67,7 @@ THERMOELECTRIC_MECHANICAL: Mapping[str, tuple[str, ...]] = MappingProxyType(
 #: on the whole 381.4 s; MUMPS's memory 376 + 812 MB on its largest rank against 2,196 MB.
 #: Nested from 11.5k DOFs (the demo's `--linear split`): 101.8 s against 166.5 s (README).
 FIELDSPLIT_DIRECT: Mapping[str, str] = MappingProxyType(
-    {
-        "ksp_type": "gmres",
-        "ksp_gmres_restart": "200",
-        "ksp_pc_side": "right",  # the true residual: rows in W, A and N
-        "ksp_rtol": "1e-12",
-        "ksp_max_it": "1000",
-        "pc_type": "fieldsplit",
-        "pc_fieldsplit_type": "multiplicative",
-    }
+    FIELD_SWEEP
     | {
         f"fieldsplit_{split}_{k}": v
         for split in THERMOELECTRIC_MECHANICAL
