@@ -192,16 +192,20 @@ class SparseStrip:
     second factorisation would not fit beside; one layer 228,455 rows and 3.49 GB (at 174k
     DOFs one layer took the same Newton path as ten in 0.80 of the time).
 
-    With ``split`` (the default), a strip of T or φ and u is solved by one sweep over (T, φ),
-    then u, each factorised (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): exact but for
-    the contacts' laws of the pressure, two factorisations of 2 and 3 unknowns a node in place
-    of one of 5.
+    With ``split``, a strip of T or φ and u is solved by one sweep over (T, φ), then u, each
+    factorised (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): exact but for the contacts'
+    laws of the pressure, two factorisations of 2 and 3 unknowns a node in place of one of 5
+    (the collector bar slot at 204k DOFs: 0.58 of the subdomain Newton's time). Not the
+    default: from a cold start, where full steps run away, the slot at 17k DOFs met an
+    iterate at which the sweep left the interface GMRES stalled (100 iterations, the
+    residual 0.999 of its start), and the line search failed for that instead of the
+    runaway.
     """
 
     layers: int = 10
     share: float = 0.25
     narrowest: int = 1
-    split: bool = True
+    split: bool = False
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
 
