@@ -15,13 +15,10 @@ benchmarks/bench_slot_field_split.py`` (the demo's default mesh, 65,900 DOFs; ``
 """
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
-
-DEMO = Path(__file__).resolve().parent.parent / "demos" / "demo_collector_bar_slot.py"
+from slot_demo import slot_demo
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--size", type=float, default=0.06, help="element size away from the slot")
@@ -29,10 +26,7 @@ parser.add_argument("--fine", type=float, default=0.02, help="element size on th
 parser.add_argument("--setups", nargs="+", default=["constant", "pressure"])
 args = parser.parse_args()
 
-sys.argv = [str(DEMO), "--size", str(args.size), "--fine", str(args.fine), "--no-study"]
-demo = {"__name__": "bench", "__file__": str(DEMO)}
-head = DEMO.read_text().split("runs: dict = {}")[0]  # data, problem, nested: not the runs
-exec(compile(head, str(DEMO), "exec"), demo)
+demo = slot_demo("--size", str(args.size), "--fine", str(args.fine), "--no-study")
 sc, say = demo["sc"], demo["say"]
 
 ROUTES = {

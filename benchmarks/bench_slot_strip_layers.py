@@ -13,13 +13,10 @@ everywhere; 174,240 DOFs). Not a test: timings on a shared machine are noisy; co
 """
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
-
-DEMO = Path(__file__).resolve().parent.parent / "demos" / "demo_collector_bar_slot.py"
+from slot_demo import slot_demo
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--size", type=float, default=0.0388, help="element size everywhere [m]")
@@ -27,11 +24,10 @@ parser.add_argument("--levels", type=int, default=2, help="meshes of the nested 
 args = parser.parse_args()
 
 size = str(args.size)
-sys.argv = [str(DEMO), "--size", size, "--fine", size, "--no-study", "--setups", "constant"]
-sys.argv += ["--levels", str(args.levels)]
-demo = {"__name__": "bench", "__file__": str(DEMO)}
-head = DEMO.read_text().split("runs: dict = {}")[0]  # data, problem, nested: not the runs
-exec(compile(head, str(DEMO), "exec"), demo)
+demo = slot_demo(
+    "--size", size, "--fine", size, "--no-study", "--setups", "constant",
+    "--levels", str(args.levels),
+)  # fmt: skip
 sc, say = demo["sc"], demo["say"]
 
 ROUTES = {
