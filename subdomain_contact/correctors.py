@@ -278,8 +278,9 @@ class StripSolve:
                 self.comm,
                 f"sparse strip corrector ({self.K.getSize()[0]} rows)",
                 "block low-rank factors (-sc_strip_mat_mumps_icntl_35 2 "
-                "-sc_strip_mat_mumps_cntl_7 1e-5), fewer ranks per node, or a narrower strip "
-                "(SparseStrip(layers=..., share=...))",
+                "-sc_strip_mat_mumps_cntl_7 1e-5), the strip split by fields "
+                "(SparseStrip(split=True): about half the factors with T, φ and u), fewer "
+                "ranks per node, or a narrower strip (SparseStrip(layers=..., share=...))",
             )
         K = merged_matrix(system, self.rows)
         if self.K is not None and same_pattern(K, self.K):
