@@ -42,6 +42,7 @@
 import argparse
 import json
 import time
+from functools import partial
 from pathlib import Path
 
 import dolfinx_solver  # noqa: F401  (before dolfinx and petsc4py)
@@ -268,36 +269,49 @@ START = 300.0  # K, the uniform initial temperature of the coarsest mesh
 LEVELS = args.levels or (2 if args.small else 3)
 
 
+def solve_level(make, setup: str, coarse: sc.System | None, linear: str, **label) -> tuple:
+    """Newton by ``linear`` on the system of ``make()`` (a system, or a scene to pose
+    ``setup`` on): from the cold state, or from the solution of ``coarse`` interpolated
+    (``coarse`` destroyed then): (system, result, entry).
+
+    ``entry``: ``label``, then its DOFs, Newton steps, line search, time [s] (the build
+    included) and voltage drop [mV].
+    """
+    tic = time.perf_counter()
+    level = make()
+    if isinstance(level, sc.Scene):
+        level = sc.System(problem(level, setup))
+    if coarse is None:
+        level.reset({"temperature": START})
+    else:
+        level.interpolate(coarse)
+        coarse.destroy()
+    solver = route(linear)
+    result = sc.solve(level, solver, rtol=1e-10, progress=True)
+    solver.destroy()
+    entry = label | {
+        "dofs": sum(level.num_dofs().values()),
+        "newton_iterations": result.iterations,
+        "line_search": result.line_search,
+        "seconds": time.perf_counter() - tic,
+        "voltage_drop_mV": 1e3 * sc.voltage_drop(level, "top", "bar_end"),
+    }
+    return level, result, entry
+
+
 def nested(system: sc.System, setup: str, bar_height: float, linear: str):
     """Newton by ``linear`` on the coarser meshes, then on ``system``: (result, levels).
 
-    ``levels``: per mesh, from the coarsest, its coarsening, DOFs, Newton steps, line
-    search, time [s] and voltage drop [mV].
+    ``levels``: per mesh, from the coarsest, its coarsening and :func:`solve_level`'s entry.
     """
     levels, coarse = [], None
     for coarsening in [2.0**i for i in range(LEVELS - 1, 0, -1)] + [1.0]:
-        tic = time.perf_counter()
-        level = system if coarsening == 1.0 else sc.System(
-            problem(load(bar_height, coarsening, like=system.problem.scene), setup)
-        )  # fmt: skip
-        if coarse is None:
-            level.reset({"temperature": START})
-        else:
-            level.interpolate(coarse)
-            coarse.destroy()
-        solver = route(linear)
-        result = sc.solve(level, solver, rtol=1e-10, progress=True)
-        solver.destroy()
-        levels.append({
-            "coarsening": coarsening,
-            "dofs": sum(level.num_dofs().values()),
-            "newton_iterations": result.iterations,
-            "line_search": result.line_search,
-            "seconds": time.perf_counter() - tic,
-            "voltage_drop_mV": 1e3 * sc.voltage_drop(level, "top", "bar_end"),
-        })  # fmt: skip
-        say(f"  mesh {coarsening:g} times coarser: {levels[-1]['dofs']} DOFs, "
-            f"{result.iterations} Newton steps, {levels[-1]['seconds']:.1f} s")  # fmt: skip
+        like, fine = system.problem.scene, coarsening == 1.0
+        make = (lambda: system) if fine else partial(load, bar_height, coarsening, like)
+        level, result, entry = solve_level(make, setup, coarse, linear, coarsening=coarsening)
+        levels.append(entry)
+        say(f"  mesh {coarsening:g} times coarser: {entry['dofs']} DOFs, "
+            f"{result.iterations} Newton steps, {entry['seconds']:.1f} s")  # fmt: skip
         coarse = level
     return result, levels
 
@@ -370,36 +384,20 @@ convergence = {}
 for setup in () if args.no_study or args.small else args.setups:
     levels, coarse = [], None
     for refinements in range(REFINEMENTS + 1):
-        tic = time.perf_counter()
-        scene = load(0.16, 2.0**LEVELS, like=scenes[0.16], refinements=refinements)
-        level = sc.System(problem(scene, setup))
-        if coarse is None:
-            level.reset({"temperature": START})
-        else:
-            level.interpolate(coarse)
-            coarse.destroy()
-        solver = route("split")
-        result = sc.solve(level, solver, rtol=1e-10, progress=True)
-        solver.destroy()
-        levels.append({
-            "refinements": refinements,
-            "dofs": sum(level.num_dofs().values()),
-            "voltage drop [mV]": 1e3 * sc.voltage_drop(level, "top", "bar_end"),
-            "newton_iterations": result.iterations,
-            "seconds": time.perf_counter() - tic,
-        })  # fmt: skip
-        say(f"  mesh study, {setup}: {refinements} refinements, {levels[-1]['dofs']} DOFs, "
-            f"{levels[-1]['voltage drop [mV]']:.4f} mV, {levels[-1]['seconds']:.1f} s")  # fmt: skip
-        coarse = level
+        make = partial(load, 0.16, 2.0**LEVELS, scenes[0.16], refinements)
+        coarse, _, entry = solve_level(make, setup, coarse, "split", refinements=refinements)
+        levels.append(entry)
+        say(f"  mesh study, {setup}: {refinements} refinements, {entry['dofs']} DOFs, "
+            f"{entry['voltage_drop_mV']:.4f} mV, {entry['seconds']:.1f} s")  # fmt: skip
     coarse.destroy()
     entry = {key: [level[key] for level in levels] for key in levels[0]}
-    v1, v2, v3 = entry["voltage drop [mV]"][-3:]
+    v1, v2, v3 = entry["voltage_drop_mV"][-3:]
     order = float(np.log2((v1 - v2) / (v2 - v3))) if (v1 - v2) * (v2 - v3) > 0 else None
     entry["observed order"] = order
     if order is not None and order > 0:  # differences that grow extrapolate nothing
         entry["extrapolated [mV]"] = v3 + (v3 - v2) / (2**order - 1)
     convergence[setup] = entry
-    say(f"{setup}: voltage drop by mesh {entry['voltage drop [mV]']}, order "
+    say(f"{setup}: voltage drop by mesh {entry['voltage_drop_mV']}, order "
         f"{entry.get('observed order')}")  # fmt: skip
 
 # ## Time of the subdomain Newton over the monolithic one (each by its whole nested iteration,

@@ -33,6 +33,7 @@ from subdomain_contact.merged import Layout, merged_matrix, same_pattern
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
     SWEEP_DIRECT,
+    THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
     make_ksp,
@@ -309,17 +310,13 @@ class StripSolve:
         """
         if self.ksp is None:
             mine = self.comm.exscan(system.local_size) or 0  # None on rank 0
-            u = system.field_of[self.rows - mine] == FIELDS.index("displacement")
+            field = system.field_of[self.rows - mine]
             first = self.K.getOwnershipRange()[0]
-            self.sets = [
-                (
-                    name,
-                    PETSc.IS().createGeneral(
-                        (first + np.flatnonzero(rows)).astype(PETSc.IntType), comm=self.comm
-                    ),
-                )
-                for name, rows in (("thermoelectric", ~u), ("displacement", u))
-            ]
+            self.sets = []
+            for name, fields in THERMOELECTRIC_MECHANICAL.items():  # SWEEP_DIRECT's splits
+                rows = np.flatnonzero(np.isin(field, [FIELDS.index(f) for f in fields]))
+                indices = (first + rows).astype(PETSc.IntType)
+                self.sets.append((name, PETSc.IS().createGeneral(indices, comm=self.comm)))
             options = ordered(
                 SWEEP_DIRECT, system.problem.scene.dim, self.K.getSize()[0],
                 again=not system.is_linear,
