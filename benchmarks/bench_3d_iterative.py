@@ -6,6 +6,8 @@ several contact conductances h, each solved by:
 
 * the subdomain route with iterative bodies (``sc.System(problem, solver="iterative")``):
   CG + GAMG per body, the interface Krylov with the exact corrector on a strip;
+* the same with the strip clamped at its cut (``sc.SparseStrip(cut="clamped")``), as it
+  was until 2026-12-01, instead of the Robin cut;
 * the subdomain route with direct bodies (``solver="direct"``): MUMPS with the Schur block;
 * monolithic MUMPS (``sc.Monolithic()``) and CG + GAMG (``sc.CG_GAMG``).
 
@@ -55,7 +57,13 @@ from pathlib import Path
 
 TARGET = 1e-8  # the error at which the times are compared
 CONDUCTANCES = (1e-2, 1.0, 1e3, 1e6, 1e10)
-METHODS = ("subdomain iterative", "subdomain direct", "MUMPS", "CG + GAMG")
+METHODS = (
+    "subdomain iterative",
+    "subdomain clamped",
+    "subdomain direct",
+    "MUMPS",
+    "CG + GAMG",
+)
 
 
 def worker(
@@ -89,8 +97,10 @@ def worker(
             "reference": lambda: sc.Monolithic(refine=2),
             "MUMPS": lambda: sc.Monolithic(),
             "CG + GAMG": lambda: sc.Monolithic(sc.CG_GAMG),
+            "subdomain clamped": lambda: sc.Subdomains(sc.SparseStrip(cut="clamped")),
         }.get(method, lambda: sc.Subdomains())()
-        bodies = {"subdomain iterative": "iterative", "subdomain direct": "direct"}
+        bodies = {"subdomain iterative": "iterative", "subdomain clamped": "iterative",
+                  "subdomain direct": "direct"}  # fmt: skip
         comm.Barrier()
         base = resident()
         tic = time.perf_counter()

@@ -55,6 +55,10 @@ __all__ = [
 
 Matrix = npt.NDArray[np.float64]
 
+#: How the sparse strip is cut off where its body goes on: by a Robin condition
+#: (:func:`~subdomain_contact.merged.merged_matrix`'s ``reach``), or clamped.
+CUTS = ("robin", "clamped")
+
 
 class Corrector(Protocol):
     """Builds the dense operator G of one interface from its two bodies' parts."""
@@ -172,14 +176,20 @@ class SparseStrip:
     """The exact corrector on a strip, for every interface at once, by a sparse solve.
 
     The merged matrix restricted to ``layers`` element layers of every body along its
-    contacts and to every master layer, clamped beyond the strips. Eliminating the strips
-    leaves ``Σ_α S̃^α`` on the masters, ``S̃^α = D − C (K̂ + L)⁻¹ B`` with K̂ the body cut to
-    its strip: the series law ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` of the thermal case with a stiffer K̂,
-    exact where the link is soft; where it is stiff, the strip is too stiff for the modes
-    smooth along the contact (the coarse space takes out the constant one). The interfaces
-    are coupled through the bodies, not corrected one by one. Applied by one solve of that
-    sparse matrix (MUMPS, options under ``-<prefix>``): nothing dense is stored, so it serves
-    interfaces of any size and bodies whose contact DOFs are most of their DOFs.
+    contacts and to every master layer. Eliminating the strips leaves ``Σ_α S̃^α`` on the
+    masters, ``S̃^α = D − C (K̂ + L)⁻¹ B`` with K̂ the body cut to its strip: the series law
+    ``((h̄M)⁻¹ + K̂⁻¹)⁻¹`` of the thermal case, exact where the link is soft. Where it is
+    stiff, K̂ decides: clamped at its cut (``cut="clamped"``), a strip of width w answers a
+    mode cos(ξ s) along the contact by k ξ coth(ξ w) where the body answers k ξ, too stiff
+    for the modes smooth along the contact (the coarse space takes the constant), the more
+    so as a fixed count of layers thins on a finer mesh. By default (``cut="robin"``) the
+    cut carries a Robin condition that answers the lowest mode along each face as the body
+    does (:func:`reach`, :func:`~subdomain_contact.merged.merged_matrix`): two 3D blocks
+    (T, h = 1e6, 2 ranks, 939,678 DOFs) 10 interface CG iterations clamped, 7 with it. The
+    interfaces are coupled through the bodies, not corrected one by one. Applied by one
+    solve of that sparse matrix (MUMPS, options under ``-<prefix>``): nothing dense is
+    stored, so it serves interfaces of any size and bodies whose contact DOFs are most of
+    their DOFs.
 
     The strip of an iterative body stops growing before it covers more than ``share`` of the
     body's DOFs (at least one layer): it is factorised, where the body is solved iteratively
@@ -207,6 +217,7 @@ class SparseStrip:
     share: float = 0.25
     narrowest: int = 1
     split: bool = False
+    cut: str = "robin"
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
 
@@ -219,8 +230,12 @@ class SparseStrip:
             )
         if not 0.0 < self.share <= 1.0:
             raise ValueError(f"sparse strip corrector: share = {self.share}, not in (0, 1]")
+        if self.cut not in CUTS:
+            raise ValueError(f"sparse strip corrector: cut = {self.cut!r}, not one of {CUTS}")
         if operator is None:
-            operator = StripSolve(self.prefix, self.layers, self.share, self.split)
+            operator = StripSolve(
+                self.prefix, self.layers, self.share, self.split, self.cut == "robin"
+            )
         operator.update(system)
         if operator.layers > self.narrowest and operator.factorisations == 1:
             if not operator.fits():  # its next factorisation would not fit: narrower, once
@@ -234,8 +249,18 @@ class StripSolve:
     Call :meth:`destroy` (collectively) when done.
     """
 
-    def __init__(self, prefix: str, layers: int, share: float = 1.0, split: bool = False) -> None:
+    def __init__(
+        self,
+        prefix: str,
+        layers: int,
+        share: float = 1.0,
+        split: bool = False,
+        robin: bool = True,
+    ) -> None:
         self.prefix, self.split = prefix, split
+        #: Body name -> the length of the Robin condition on its cut (:func:`reach`); None:
+        #: every strip clamped at its cut
+        self.reach: dict[str, float] | None = {} if robin else None
         #: The split's row sets, where the strip is solved by a sweep over its fields
         self.sets: list[tuple[str, PETSc.IS]] = []
         #: Element layers of each body's strip; ``share``: the largest part of an iterative
@@ -266,6 +291,8 @@ class StripSolve:
                 strip = dofs_within_layers(body.forms.W, seeds.astype(np.int32), layers, most)
                 picked.append(layout.body(name, body.start + strip))
                 whole[name] = body.comm.allreduce(strip.size == body.size, op=MPI.LAND)
+                if self.reach is not None:
+                    self.reach[name] = reach(system, body)
             self.whole = frozenset(n for n, w in system.everywhere(whole).items() if w)
             self.masters = 0
             if self.comm.rank == 0:
@@ -283,7 +310,7 @@ class StripSolve:
                 "(SparseStrip(split=True): about half the factors with T, φ and u), fewer "
                 "ranks per node, or a narrower strip (SparseStrip(layers=..., share=...))",
             )
-        K = merged_matrix(system, self.rows)
+        K = merged_matrix(system, self.rows, self.reach)
         if self.K is not None and same_pattern(K, self.K):
             K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
             K.destroy()
@@ -366,6 +393,19 @@ class StripSolve:
         destroy(self.K, self.ksp, *(iset for _, iset in self.sets))
         self.K = self.ksp = self.rows = None
         self.sets = []
+
+
+def reach(system: System, body: Body) -> float:
+    """The length [m] of the Robin condition on a body's cut: ``D / π``.
+
+    D is the largest side of the bounding box of any of its contact faces: the Robin
+    condition is then exact for the lowest mode along that face but its constant (which the
+    coarse space takes), ``cos(π s / D)``, and nearly so for every higher one. Two 3D blocks
+    (T, h = 1e6, 0.2 m faces, rtol 1e-12, 2 ranks, 939,678 DOFs): 10 interface CG
+    iterations clamped, 7 with the Robin cut at 0.2 / π, 420 → 325 body CG iterations.
+    """
+    sides = [np.ptp(system.layers[k].coordinates, axis=0).max() for k in body.layers]
+    return max(sides, default=0.0) / np.pi
 
 
 def dofs_within_layers(

@@ -9,6 +9,8 @@ strip corrector (its rows and columns restricted to strips along the contacts).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse
@@ -48,7 +50,11 @@ Entries = tuple[npt.NDArray, npt.NDArray, npt.NDArray]  # rows, columns, values
 
 
 def _body_entries(
-    system: System, layout: Layout, name: str, place: npt.NDArray | None = None
+    system: System,
+    layout: Layout,
+    name: str,
+    place: npt.NDArray | None = None,
+    reach: float | None = None,
 ) -> tuple[list[Entries], list[Entries]]:
     """A body's entries of the merged matrix, global indices, zeros included.
 
@@ -57,7 +63,8 @@ def _body_entries(
     halves on an insulating channel's), given by the body's first rank only. With ``place``
     (each global index's place among the kept ones, -1 where not kept), only the entries
     whose row and column are kept, renumbered, the rows chosen before the body's entries
-    are expanded to triples.
+    are expanded to triples; with ``reach`` too, the entries to the body's dropped columns
+    are lumped on the row's node (:func:`_lumped`) instead of dropped.
     """
     body = system.bodies[name]
     indptr, indices, data = body.whole_matrix().getValuesCSR()
@@ -71,6 +78,10 @@ def _body_entries(
         entries = np.repeat(picked, counts)
         rows = [(first_row + np.repeat(np.flatnonzero(picked), counts[picked]),
                  layout.body(name, indices[entries]), data[entries])]  # fmt: skip
+        if reach is not None:
+            local = np.repeat(np.flatnonzero(picked), counts[picked])
+            rows.append(_lumped(system, layout, name, place, local, indices[entries],
+                                data[entries], reach))  # fmt: skip
     masters = []
     kept = layout.body(name, body.kept)
     owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
@@ -99,6 +110,68 @@ def _body_entries(
     if place is not None:
         rows, masters = _restricted(rows, place), _restricted(masters, place)
     return rows, masters
+
+
+def _lumped(
+    system: System,
+    layout: Layout,
+    name: str,
+    place: npt.NDArray,
+    rows: npt.NDArray,
+    columns: npt.NDArray,
+    values: npt.NDArray,
+    reach: float,
+) -> Entries:
+    """The kept rows' entries to dropped columns, as a Robin condition on the cut.
+
+    Restricted to the kept rows and columns, the body would be clamped at the first node
+    beyond the cut: a stiffness of one element layer where the body goes on. A dropped
+    node j at distance d from the row's node i is taken to follow it, ``y_j = (1 − θ) y_i``
+    component by component, with ``θ = d / (d + reach)``: the element's link to j in series
+    with ``reach`` more of the body to where it is held, so that the cut answers a mode of
+    wavenumber ``1 / reach`` as the whole body would (a slab of width w with the Robin
+    coefficient k ξ behind it has the half-space's response k ξ at ξ; clamped, k ξ coth ξw).
+    Where the row's and the column's components differ, the node's block is made symmetric
+    for a symmetric system (CG) only: unsymmetric, it keeps the body's rigid translations
+    (with ``reach`` → ∞ a translation is in the kernel of the strip's rows but the
+    contacts', as of the body's). ``rows``: the kept rows' owned local indices, one per
+    entry; ``columns``: the entries' columns (the body's global numbering). Columns this
+    rank does not hold (a body spread over ranks, across a rank boundary) stay dropped.
+    """
+    body = system.bodies[name]
+    outside = place[layout.body(name, columns)] < 0
+    rows, columns, values = rows[outside], columns[outside], values[outside]
+    local = _local_dofs(body, columns)
+    held = local >= 0
+    rows, local, values = rows[held], local[held], values[held]
+    nodes = body.forms.nodes()
+    i, j = nodes.node[rows], nodes.node[local]
+    distance = np.linalg.norm(nodes.points[i] - nodes.points[j], axis=1)
+    follows = values / (1.0 + distance / reach)  # (1 − θ) a_ij
+    target = nodes.dof_at[i, nodes.component[local]]  # an owned node's: owned
+    first_row = layout.mine + system.slices[name].start
+    if not system.symmetric:
+        return first_row + rows, first_row + target, follows
+    r = np.concatenate([first_row + rows, first_row + target])
+    c = np.concatenate([first_row + target, first_row + rows])
+    return r, c, np.concatenate([follows, follows]) / 2
+
+
+def _local_dofs(body, columns: npt.NDArray) -> npt.NDArray:
+    """Local indices (owned, then ghosts; unrolled) of global DOF numbers; -1 if not held."""
+    index_map, bs = body.forms.W.dofmap.index_map, body.forms.W.dofmap.index_map_bs
+    local = np.full(columns.size, -1, dtype=np.int64)
+    owned = (columns >= body.start) & (columns < body.start + body.size)
+    local[owned] = columns[owned] - body.start
+    ghosts = np.asarray(index_map.ghosts, dtype=np.int64)
+    if ghosts.size and not owned.all():
+        order = np.argsort(ghosts)
+        blocks, parts = np.divmod(columns[~owned], bs)
+        at = np.clip(np.searchsorted(ghosts[order], blocks), 0, ghosts.size - 1)
+        found = ghosts[order][at] == blocks
+        ghost_local = bs * (index_map.size_local + order[at]) + parts
+        local[~owned] = np.where(found, ghost_local, -1)
+    return local
 
 
 def _restricted(parts: list[Entries], place: npt.NDArray) -> list[Entries]:
@@ -135,7 +208,9 @@ def _aij(
     )
 
 
-def merged_matrix(system: System, rows: npt.NDArray | None = None) -> PETSc.Mat:
+def merged_matrix(
+    system: System, rows: npt.NDArray | None = None, reach: Mapping[str, float] | None = None
+) -> PETSc.Mat:
     """The whole Jacobian as one AIJ matrix on the system's communicator.
 
     Rows and columns follow the global-vector layout, for bodies spread over every rank or
@@ -147,7 +222,9 @@ def merged_matrix(system: System, rows: npt.NDArray | None = None) -> PETSc.Mat:
     restricted to them, rows and columns, numbered in their order over the ranks (as
     ``createSubMatrix`` numbers them), without the whole being made (the sparse strip of the
     collector bar slot at 1.07M DOFs: the whole merged matrix had doubled a rank's resident
-    set, 6.1 to 11.4 GiB, for a strip of 228k of its rows).
+    set, 6.1 to 11.4 GiB, for a strip of 228k of its rows). ``reach``: body name -> the
+    length [m] of a Robin condition on that body's cut (:func:`_lumped`); a body not named
+    is clamped beyond its kept rows.
     """
     comm, layout = system.comm, Layout(system)
     keep, place = None, None
@@ -160,7 +237,8 @@ def merged_matrix(system: System, rows: npt.NDArray | None = None) -> PETSc.Mat:
             place[keep] = np.arange(keep.size)
     entries, masters = [], []
     for name in system.bodies:
-        body_rows, body_masters = _body_entries(system, layout, name, place)
+        cut = None if place is None or reach is None else reach.get(name)
+        body_rows, body_masters = _body_entries(system, layout, name, place, cut)
         entries += body_rows
         masters += body_masters
     gathered = comm.gather(masters, root=0)

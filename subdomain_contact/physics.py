@@ -595,6 +595,7 @@ class BodyForms:
     time: dolfinx.fem.Constant | None
     moving: list[tuple[dolfinx.fem.Function, dolfinx.fem.Expression]]
     _collapsed: dict = field(default_factory=dict, repr=False)
+    _nodes: DofNodes | None = field(default=None, repr=False)
     _parts: dict = field(default_factory=dict, repr=False)
 
     def parts(self, test: bool = False) -> dict[str, Expr]:
@@ -630,6 +631,47 @@ class BodyForms:
                 collapsed, to_parent = V.collapse()
                 self._collapsed[name, component] = (collapsed, np.asarray(to_parent[0]))
         return self._collapsed[name, component]
+
+    def nodes(self) -> DofNodes:
+        """Each local DOF's node, component and the node's coordinates (made once)."""
+        if self._nodes is None:
+            dim = self.W.mesh.geometry.dim
+            parts = [(f, c) for f in self.fields
+                     for c in (range(dim) if f == "displacement" else [None])]  # fmt: skip
+            index_map = self.W.dofmap.index_map
+            size = (index_map.size_local + index_map.num_ghosts) * self.W.dofmap.index_map_bs
+            node = np.full(size, -1, dtype=np.int64)
+            component = np.full(size, -1, dtype=np.int64)
+            dof_at = np.full((size, len(parts)), -1, dtype=np.int64)
+            points = np.zeros((size, 3))
+            first = None
+            for c, (f, d) in enumerate(parts):
+                V, parent_of = self.collapsed(f, d)
+                dofs = parent_of[V.dofmap.list.ravel()]  # cell by cell, as the first's
+                if first is None:
+                    first = dofs
+                    points[dofs] = V.tabulate_dof_coordinates()[V.dofmap.list.ravel()]
+                node[dofs], component[dofs] = first, c
+                dof_at[first, c] = dofs
+            self._nodes = DofNodes(node, component, dof_at, points)
+        return self._nodes
+
+
+@dataclass(frozen=True)
+class DofNodes:
+    """Where a body's local DOFs (owned and ghosts, unrolled) sit.
+
+    Attributes:
+        node: Each DOF's node, named by the node's DOF of the first field (component).
+        component: Each DOF's field component (the fields in order, u by component).
+        dof_at: ``dof_at[n, c]``: the DOF of component c at node n (n a node's name).
+        points: Each node's coordinates [m], at its name.
+    """
+
+    node: npt.NDArray[np.int64]
+    component: npt.NDArray[np.int64]
+    dof_at: npt.NDArray[np.int64]
+    points: npt.NDArray[np.float64]
 
 
 def split_fields(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:
