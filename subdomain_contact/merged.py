@@ -136,7 +136,8 @@ def _lumped(
     (with ``reach`` → ∞ a translation is in the kernel of the strip's rows but the
     contacts', as of the body's). ``rows``: the kept rows' owned local indices, one per
     entry; ``columns``: the entries' columns (the body's global numbering). Columns this
-    rank does not hold (a body spread over ranks, across a rank boundary) stay dropped.
+    rank does not hold (a body spread over ranks, across a rank boundary), and entries that
+    would land on a DOF fixed by a Dirichlet condition, stay dropped.
     """
     body = system.bodies[name]
     outside = place[layout.body(name, columns)] < 0
@@ -149,6 +150,8 @@ def _lumped(
     distance = np.linalg.norm(nodes.points[i] - nodes.points[j], axis=1)
     follows = values / (1.0 + distance / reach)  # (1 − θ) a_ij
     target = nodes.dof_at[i, nodes.component[local]]  # an owned node's: owned
+    free = ~np.isin(target, body.fixed_local)  # a fixed DOF's row stays its condition alone
+    rows, target, follows = rows[free], target[free], follows[free]
     first_row = layout.mine + system.slices[name].start
     if not system.symmetric:
         return first_row + rows, first_row + target, follows
