@@ -93,11 +93,17 @@ def _body_entries(
         if body.comm.rank == 0:
             # the parts' entries side by side, summed when the matrix is made: a sparse sum
             # here would drop the entries that happen to cancel or vanish at this state
-            # (scipy keeps no computed zeros), and the pattern would change with the state
+            # (scipy keeps no computed zeros), and the pattern would change with the state.
+            # The masters' columns of fixed DOFs are left out, as the fixed rows' entries
+            # are (Newton's increments vanish there): the matrix keeps the system's
+            # symmetry, which GAMG needs (the slot's displacement block had 180 eigenvalues
+            # near −74, Jacobi-scaled, on fixed slaves and their masters)
             at_k = body.position[k]
+            on_free = np.isin(np.arange(len(body.kept)), body.free_kept)
             for C in [-blocks["L"][at_k]] + ([blocks["CtP"]] if "CtP" in blocks else []):
                 C = C.tocoo()
-                masters.append((at + C.row, kept[C.col], C.data))
+                moving = on_free[C.col]
+                masters.append((at + C.row[moving], kept[C.col[moving]], C.data[moving]))
             # P_kᵀ D_k P_k, sparse (the half-link's mass-like block), its stored pattern
             # whole; an inactive master row and column hold 1/2 on the diagonal alone
             active = system.active[k]
