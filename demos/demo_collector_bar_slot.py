@@ -73,9 +73,10 @@ parser.add_argument(
     "--linear",
     nargs="+",
     default=["subdomain", "monolithic"],
-    choices=["subdomain", "monolithic", "split"],
+    choices=["subdomain", "monolithic", "split", "split_single"],
     help="linear solvers of Newton (split: the monolithic Newton by GMRES on a sweep over "
-    "(T, φ), then u, each factorised)",
+    "(T, φ), then u, each factorised; split_single: each factorised in single precision, "
+    "half the memory, for ≥ 1M DOFs)",
 )
 parser.add_argument(
     "--setups", nargs="+", default=["constant", "pressure"], help="contact setups to run"
@@ -180,9 +181,10 @@ def load(
 
 
 def route(name: str):
-    """Newton's linear solver: ``"subdomain"``, ``"monolithic"`` or ``"split"``."""
-    if name == "split":
-        return sc.Monolithic(sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL)
+    """Newton's linear solver by name (``--linear``)."""
+    if name.startswith("split"):
+        options = sc.FIELDSPLIT_SINGLE if name == "split_single" else sc.FIELDSPLIT_DIRECT
+        return sc.Monolithic(options, splits=sc.THERMOELECTRIC_MECHANICAL)
     return sc.Subdomains() if name == "subdomain" else sc.Monolithic()
 
 

@@ -65,7 +65,12 @@ from subdomain_contact.readback import (
     voltage_drop,
 )
 from subdomain_contact.scene import Scene, load_scene
-from subdomain_contact.solvers import DIRECT, FIELDSPLIT_DIRECT, THERMOELECTRIC_MECHANICAL
+from subdomain_contact.solvers import (
+    DIRECT,
+    FIELDSPLIT_DIRECT,
+    FIELDSPLIT_SINGLE,
+    THERMOELECTRIC_MECHANICAL,
+)
 from subdomain_contact.subdomain import (
     InterfaceResult,
     SubdomainConvergenceError,
@@ -81,6 +86,7 @@ __all__ = [
     "DIRECT",
     "FIELDSPLIT_DIRECT",
     "FIELDSPLIT_GAMG",
+    "FIELDSPLIT_SINGLE",
     "MAX_TEMPERATURE_STEP",
     "THERMOELECTRIC_MECHANICAL",
     "Contact",
