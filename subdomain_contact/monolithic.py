@@ -22,7 +22,14 @@ from petsc4py import PETSc
 from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
 from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import FIELDS
-from subdomain_contact.solvers import DIRECT, FIELD_SWEEP, destroy, make_ksp, ordered
+from subdomain_contact.solvers import (
+    DIRECT,
+    FIELD_SWEEP,
+    destroy,
+    make_ksp,
+    ordered,
+    refactorisation_shortfall,
+)
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
 
@@ -160,6 +167,12 @@ class Monolithic:
         self.system = system
         bddc = self._bddc()
         if bddc:  # a new preconditioner for every new matrix
+            self.destroy()
+        if self.ksp is not None and refactorisation_shortfall(self.ksp, system.comm):
+            # a new factorisation beside the old one and the new matrix would not fit: free
+            # them first, at the cost of a new analysis (the collector bar slot at 1.14M
+            # DOFs, the split in single precision on 2 ranks: 11.9 GB a rank at the first
+            # factorisation, a rank killed at the second)
             self.destroy()
         merged = unassembled_matrix(system) if bddc else merged_matrix(system)
         failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0

@@ -11,7 +11,7 @@ from helpers import make_system
 from mpi4py import MPI
 
 import subdomain_contact as sc
-from subdomain_contact import laws
+from subdomain_contact import laws, monolithic
 from subdomain_contact.physics import (
     Contact,
     Displacement,
@@ -317,6 +317,38 @@ def test_the_split_solve_in_single_precision_is_the_direct_one(bars):
     # conductances one iteration becomes 2–4, a contraction of 1e-4 to 1e-6 each): 1e-12 is
     # reached within 4 iterations beyond the rank bound
     assert max(single) <= rows + 1 + 4, (single, rows)
+
+
+def test_a_factorisation_that_would_not_fit_again_is_freed_before_the_next(bars, monkeypatch):
+    """Where a new factorisation would not fit beside the kept one (MUMPS's INFO(22) against
+    the memory left), the monolithic solve frees its matrix and factors before it merges the
+    next matrix, and factorises that anew (a new analysis): the same Newton path and
+    solution, each step's factors made from nothing.
+    """
+    system = make_system(squeezed_joule_bars(bars))
+    states, results, made, ksps = {}, {}, {}, []
+    original = monolithic.make_ksp
+
+    def counted(*args, **kwargs):
+        ksps.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(monolithic, "make_ksp", counted)
+    for name in ("kept", "freed"):
+        if name == "freed":  # as if every refactorisation fell short of memory
+            monkeypatch.setattr(monolithic, "refactorisation_shortfall", lambda ksp, comm: "x")
+        linear = sc.Monolithic(sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL)
+        before = len(ksps)
+        system.reset({"temperature": 300.0})
+        results[name] = sc.solve(system, linear, rtol=1e-12)
+        states[name] = system.state()
+        made[name] = (len(ksps) - before, linear.factorisations)
+        linear.destroy()
+    assert made["kept"][0] == 1 < made["kept"][1]  # one KSP, factorised again each step
+    assert made["freed"][0] == made["freed"][1] == made["kept"][1]  # a KSP made each step
+    assert results["freed"].iterations == results["kept"].iterations
+    # the same matrices, factorised with another analysis: the same solution to Newton's stop
+    assert max(system.difference(states["freed"], states["kept"]).values()) < 1e-8
 
 
 @pytest.mark.parametrize(
