@@ -99,10 +99,9 @@ def _body_entries(
             # symmetry, which GAMG needs (the slot's displacement block had 180 eigenvalues
             # near −74, Jacobi-scaled, on fixed slaves and their masters)
             at_k = body.position[k]
-            on_free = np.isin(np.arange(len(body.kept)), body.free_kept)
             for C in [-blocks["L"][at_k]] + ([blocks["CtP"]] if "CtP" in blocks else []):
                 C = C.tocoo()
-                moving = on_free[C.col]
+                moving = np.isin(C.col, body.free_kept)
                 masters.append((at + C.row[moving], kept[C.col[moving]], C.data[moving]))
             # P_kᵀ D_k P_k, sparse (the half-link's mass-like block), its stored pattern
             # whole; an inactive master row and column hold 1/2 on the diagonal alone

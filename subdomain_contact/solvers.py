@@ -195,7 +195,7 @@ def make_ksp(
         # a split's block is factorised at its own set-up, which PCFIELDSPLIT leaves to the
         # first solve, and MUMPS reads its options there (ICNTL(7), ``pc_precision``): set
         # the splits up while their options are in the database
-        for sub in pc.getFieldSplitSubKSP() if splits else ():
+        for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
             sub.setUp()
     for name in added:
         database.delValue(name)
