@@ -11,6 +11,7 @@ balancing domain decomposition, PCBDDC, whose interface is then the master layer
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 
@@ -106,6 +107,14 @@ class Monolithic:
             :data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`; fields the problem
             lacks are left out. Default: one split per field, named by it, in the problem's
             order.
+        keep: Keep the factorisation across Newton steps as the preconditioner of the Krylov
+            solve on each new Jacobian (not for ``ksp_type preonly``), and factorise again at
+            the next Jacobian once the solves on it have cost, beyond the time of its first
+            solve each, ``keep`` times the time of its factorisation (1: the ski-rental rule,
+            within twice the cost of the best choice of steps in hindsight); at once where a
+            solve on a kept factorisation fails. None: factorise every Jacobian. The times
+            are wall-clock, the slowest rank's, so which steps factorise may differ between
+            runs; each step is still solved to the Krylov tolerance.
 
     Call :meth:`destroy` (collectively) when done.
     """
@@ -119,7 +128,15 @@ class Monolithic:
         refine: int = 0,
         inexact: bool = False,
         splits: Mapping[str, Sequence[str]] | None = None,
+        keep: float | None = None,
     ) -> None:
+        krylov = options.get("ksp_type", "preonly")
+        if keep is not None and (not keep >= 0.0 or krylov == "preonly"):
+            raise ValueError(
+                f"Monolithic(keep={keep}): a kept factorisation needs a Krylov solve (options "
+                f"give ksp_type {krylov}) and keep ≥ 0"
+            )
+        self.keep = keep
         self.options, self.prefix, self.monitor = options, prefix, monitor
         self.refine, self.inexact = refine, inexact
         self.groups = None if splits is None else {k: tuple(v) for k, v in splits.items()}
@@ -129,6 +146,15 @@ class Monolithic:
         self.ksp: PETSc.KSP | None = None
         #: Set-ups of the merged matrix's solve: factorisations, for a direct one.
         self.factorisations = 0
+        #: Solves on a factorisation kept from an earlier Jacobian that converged (``keep``).
+        self.reuses = 0
+        self._made: Mapping[str, str] = {}  # the options the KSP was made with
+        self._shell: PETSc.Mat | None = None  # J applied by the assembled blocks
+        self._stale = False  # the operator has values the factorisation has not seen
+        self._factorised = 0.0  # seconds of the last factorisation [s]
+        self._first: float | None = None  # seconds of the first solve on it [s]
+        self._first_iterations = 1  # its iterations
+        self._excess = 0.0  # seconds of the later solves beyond the first's [s]
 
     def _bddc(self) -> bool:
         """Whether the solve is PCBDDC (given in ``options`` or on the command line)."""
@@ -168,6 +194,38 @@ class Monolithic:
         bddc = self._bddc()
         if bddc:  # a new preconditioner for every new matrix
             self.destroy()
+        failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0
+        if (
+            self.ksp is not None
+            and self.keep is not None
+            and not failed
+            and self._excess < self.keep * self._factorised
+        ):
+            # the factorisation of an earlier Jacobian preconditions GMRES on this one,
+            # applied by the assembled blocks (``System.mult``): no merged matrix is made
+            # (at 1.14M DOFs the merge beside the kept factors ran a node out of memory)
+            self.ksp.setOperators(self._jacobian(), self.K)
+            self._stale = True
+            return
+        self._merge(system)
+
+    def _jacobian(self) -> PETSc.Mat:
+        """``J`` applied by the system's assembled blocks (a shell matrix in K's layout)."""
+        if self._shell is None:
+            solve = self
+
+            class Jacobian:
+                def mult(self, mat: PETSc.Mat, x: PETSc.Vec, y: PETSc.Vec) -> None:
+                    solve.system.mult(x, y)
+
+            self._shell = PETSc.Mat().createPython(self.K.getSizes(), comm=self.K.getComm())
+            self._shell.setPythonContext(Jacobian())
+            self._shell.setUp()
+        return self._shell
+
+    def _merge(self, system: System) -> None:
+        """Merge the blocks into ``K`` and factorise it (in place where the pattern is K's)."""
+        bddc = self._bddc()
         if self.ksp is not None and refactorisation_shortfall(self.ksp, system.comm):
             # a new factorisation beside the old one and the new matrix would not fit: free
             # them first, at the cost of a new analysis (the collector bar slot at 1.14M
@@ -180,18 +238,30 @@ class Monolithic:
             # the same sparsity (a new Newton step): MUMPS keeps its analysis
             merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             merged.destroy()
-            self.ksp.setOperators(self.K)
-            self.ksp.setUp()
-            self.factorisations += 1
+            self._factorise()
             return
         self.destroy()
         self.K = merged
         dim, rows = system.problem.scene.dim, self.K.getSize()[0]
-        options = ordered(self.options, dim, rows, again=not system.is_linear)
-        if options.get("pc_type") == "fieldsplit":
+        self._made = ordered(self.options, dim, rows, again=not system.is_linear)
+        if self._made.get("pc_type") == "fieldsplit":
             self.splits = field_splits(system, self.groups)
-        self.ksp = make_ksp(self.K, self.prefix, options, splits=self.splits)
-        self.factorisations += 1
+        self._make()
+
+    def _clock(self, work: Callable[[], None]) -> float:
+        """Run ``work`` (collective); its wall-clock time on the slowest rank [s]."""
+        start = time.perf_counter()
+        work()
+        return self.K.getComm().tompi4py().allreduce(time.perf_counter() - start, op=MPI.MAX)
+
+    def _make(self) -> None:
+        """A new KSP on ``K`` from the options it was made with (analysis and factorisation)."""
+
+        def make() -> None:
+            self.ksp = make_ksp(self.K, self.prefix, self._made, splits=self.splits)
+            self.ksp.getPC().setReusePreconditioner(self.keep is not None)
+
+        self._fresh(self._clock(make))
         if self.monitor is not None:
 
             def watch(ksp: PETSc.KSP, iteration: int, norm: float) -> None:
@@ -205,18 +275,70 @@ class Monolithic:
 
             self.ksp.setMonitor(watch)
 
+    def _factorise(self) -> None:
+        """Factorise ``K``'s new values in place (MUMPS keeps its analysis)."""
+
+        def factorise() -> None:
+            self.ksp.getPC().setReusePreconditioner(False)
+            self.ksp.setOperators(self.K)  # else a KSP set up once does not set up its PC again
+            self.ksp.setUp()
+            pc = self.ksp.getPC()
+            for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
+                sub.setUp()  # at once, not at the first solve: its time is the set-up's
+            self.ksp.getPC().setReusePreconditioner(self.keep is not None)
+
+        self._fresh(self._clock(factorise))
+
+    def _fresh(self, seconds: float) -> None:
+        """Count a factorisation that took ``seconds`` [s]; its solves start afresh."""
+        self.factorisations += 1
+        self._factorised, self._first, self._excess, self._stale = seconds, None, 0.0, False
+
+    def _stale_limit(self, limit: int) -> int:
+        """Iterations a solve on the kept factorisation may take (at most ``limit``).
+
+        Its first solve's iterations, plus those that the rest of the budget (``keep``
+        times the factorisation's time, less the excess so far) pays for at its first solve's
+        time per iteration; beyond, factorising again is cheaper.
+        """
+        per_iteration = self._first / self._first_iterations
+        budget = max(0.0, self.keep * self._factorised - self._excess)
+        extra = budget / per_iteration if per_iteration > 0.0 else np.inf
+        return int(min(limit, self._first_iterations + 1 + min(extra, limit)))
+
     def solve(self, b: Vector | None, tolerance: Tolerance) -> tuple[Vector, InterfaceResult]:
-        """One solve; its result counts the iterations of an iterative solve as rounds."""
+        """One solve; its result counts the iterations of an iterative solve as rounds.
+
+        On a kept factorisation (``keep``) a failed solve factorises the matrix and solves
+        again.
+        """
         rhs, x = self.K.createVecs()
         rhs.array[:] = 0.0 if b is None else b
         if self.inexact and tolerance.atol is not None:
             self.ksp.setConvergenceTest(self._per_field(dict(tolerance.atol)))
-        self.ksp.solve(rhs, x)
+        limit = self.ksp.getTolerances()[3]
+        if self._stale:  # no more iterations than the rest of the budget pays for
+            self.ksp.setTolerances(max_it=self._stale_limit(limit))
+        seconds = self._clock(lambda: self.ksp.solve(rhs, x))
+        self.ksp.setTolerances(max_it=limit)
         reason = self.ksp.getConvergedReason()
         iterations = self.ksp.getIterationNumber()
+        if reason >= 0 and self._stale:
+            self.reuses += 1
+        if reason < 0 and self._stale:  # this Jacobian merged and factorised after all
+            self._merge(self.system)
+            if self.inexact and tolerance.atol is not None:
+                self.ksp.setConvergenceTest(self._per_field(dict(tolerance.atol)))
+            seconds = self._clock(lambda: self.ksp.solve(rhs, x))
+            reason = self.ksp.getConvergedReason()
+            iterations += self.ksp.getIterationNumber()
+        if self._first is None:
+            self._first, self._first_iterations = seconds, max(1, self.ksp.getIterationNumber())
+        else:
+            self._excess += max(0.0, seconds - self._first)
         residual, correction = self.K.createVecs()
         for _ in range(self.refine):
-            self.K.mult(x, residual)
+            self.ksp.getOperators()[0].mult(x, residual)
             residual.aypx(-1.0, rhs)
             self.ksp.solve(residual, correction)
             x.axpy(1.0, correction)
@@ -250,8 +372,8 @@ class Monolithic:
 
     def destroy(self) -> None:
         """Free the merged matrix and its factorisation (collective)."""
-        destroy(self.K, self.ksp, *(iset for _, iset in self.splits))
-        self.K, self.ksp, self.splits = None, None, []
+        destroy(self.K, self.ksp, self._shell, *(iset for _, iset in self.splits))
+        self.K, self.ksp, self._shell, self.splits = None, None, None, []
 
 
 def _groups(

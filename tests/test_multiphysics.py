@@ -351,6 +351,109 @@ def test_a_factorisation_that_would_not_fit_again_is_freed_before_the_next(bars,
     assert max(system.difference(states["freed"], states["kept"]).values()) < 1e-8
 
 
+def _costed(monkeypatch, factorisation: float) -> list[tuple[bool, int, int]]:
+    """Replace the monolithic solve's clock by a cost model, recording each solve.
+
+    A factorisation costs ``factorisation``, a solve its GMRES iterations (the units of
+    both alike): the rule of ``keep`` then depends on the iterations alone, not on the
+    machine's timing. Returns the record: per solve (on a kept factorisation, its
+    iterations, its iteration limit, whether it converged).
+    """
+    record = []
+
+    def clock(self, work):
+        stale, limit = self._stale, self.ksp.getTolerances()[3] if self.ksp else 0
+        work()
+        if work.__name__ in ("make", "factorise"):
+            return factorisation
+        converged = self.ksp.getConvergedReason() > 0
+        record.append((stale, self.ksp.getIterationNumber(), limit, converged))
+        return float(self.ksp.getIterationNumber())
+
+    monkeypatch.setattr(monolithic.Monolithic, "_clock", clock)
+    return record
+
+
+@pytest.mark.parametrize("factorisation", [0.0, 8.0, np.inf])
+def test_a_kept_factorisation_is_replaced_once_its_extra_iterations_cost_one(
+    bars, monkeypatch, factorisation
+):
+    """``Monolithic(keep=1)``: the split's factorisation serves later Newton steps as
+    GMRES's preconditioner (the Jacobian applied by the assembled blocks) until the solves
+    on it have taken, beyond its first solve's iterations each, as many iterations as a
+    factorisation costs (a cost model here: a factorisation as ``factorisation``
+    iterations). Each step is still solved to GMRES's
+    1e-12, so Newton reaches the solution of the split factorised at every step, with fewer
+    factorisations; a solve on a kept factorisation that would cost more than the rest of
+    the budget is stopped and solved again on a new one.
+    """
+    system = make_system(squeezed_joule_bars(bars))
+    states, results, linear, merges = {}, {}, {}, []
+    record = _costed(monkeypatch, factorisation)
+    merge = monolithic.merged_matrix
+    monkeypatch.setattr(monolithic, "merged_matrix", lambda s: merges.append(1) or merge(s))
+    for name, keep in (("every step", None), ("kept", 1.0)):
+        linear[name] = sc.Monolithic(
+            sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL, keep=keep
+        )
+        system.reset({"temperature": 300.0})
+        record.clear()
+        merges.clear()
+        results[name] = sc.solve(system, linear[name], rtol=1e-12)
+        states[name] = system.state()
+        linear[name].destroy()
+    # both stop at rtol 1e-12 per field on the same system (as the split against MUMPS)
+    assert max(system.difference(states["kept"], states["every step"]).values()) < 1e-8
+    steps = results["kept"].iterations
+    made, reused = linear["kept"].factorisations, linear["kept"].reuses
+    # Replay the rule on the recorded solves. Each solve on a new factorisation (the first,
+    # one made at a new Jacobian, or one made again after a failed solve) restarts the excess
+    # at 0; a kept one comes only while the excess is below the budget, may take at most
+    # n₀ + 1 + (budget left) iterations, and adds max(0, n − n₀) where it converged (where
+    # it did not, the repeat on a new factorisation comes next).
+    factorised = first = excess = 0
+    for stale, iterations, limit, converged in record:
+        if not stale:
+            factorised, first, excess = factorised + 1, iterations, 0.0
+            continue
+        assert excess < factorisation, "a kept factorisation was used beyond its budget"
+        assert limit <= first + 1 + (factorisation - excess), (limit, first, excess)
+        if converged:
+            excess += max(0, iterations - first)
+    assert made == factorised, (made, factorised)  # each failure factorised again
+    # one converged solve a Newton step, on a kept factorisation or a new one
+    assert made + reused == steps, (made, reused, steps)
+    # a kept step applies J by the blocks: a matrix is merged only to be factorised
+    assert len(merges) == made, (len(merges), made)
+    if factorisation == 0.0:  # nothing pays for a kept factorisation: every step its own
+        assert reused == 0, reused
+    else:  # measured: 9 steps; 4 on a kept factorisation (8 iterations' worth), 7 (free)
+        assert 0 < reused and made < steps, (made, reused, steps)
+
+
+def test_a_kept_factorisation_on_which_gmres_fails_is_made_again(bars, monkeypatch):
+    """A solve on a kept factorisation that does not converge within GMRES's limit is
+    solved again on the matrix factorised anew, and Newton goes on (the limit: 10
+    iterations, above the 1–4 of a fresh factorisation, below the 31–412 the steps took
+    on the first kept one, measured)."""
+    system = make_system(squeezed_joule_bars(bars))
+    record = _costed(monkeypatch, np.inf)
+    options = sc.FIELDSPLIT_DIRECT | {"ksp_max_it": "10"}
+    linear = sc.Monolithic(options, splits=sc.THERMOELECTRIC_MECHANICAL, keep=1.0)
+    system.reset({"temperature": 300.0})
+    result = sc.solve(system, linear, rtol=1e-12)
+    linear.destroy()
+    failed = [n for stale, n, limit, converged in record if stale and not converged]
+    assert failed, record  # a kept factorisation did fail ...
+    assert linear.factorisations == 1 + len(failed)  # ... and each failure factorised again
+    assert result.relative_residuals()[-1] <= 1e-12
+
+
+def test_a_kept_factorisation_needs_a_krylov_solve():
+    with pytest.raises(ValueError, match="needs a Krylov solve"):
+        sc.Monolithic(keep=1.0)
+
+
 @pytest.mark.parametrize(
     ("splits", "message"),
     [
