@@ -30,6 +30,7 @@ from subdomain_contact.solvers import (
     make_ksp,
     ordered,
     refactorisation_shortfall,
+    set_up,
 )
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
 from subdomain_contact.system import System
@@ -282,13 +283,11 @@ class Monolithic:
         """Factorise ``K``'s new values in place (MUMPS keeps its analysis)."""
 
         def factorise() -> None:
-            self.ksp.getPC().setReusePreconditioner(False)
-            self.ksp.setOperators(self.K)  # else a KSP set up once does not set up its PC again
-            self.ksp.setUp()
             pc = self.ksp.getPC()
-            for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
-                sub.setUp()  # at once, not at the first solve: its time is the set-up's
-            self.ksp.getPC().setReusePreconditioner(self.keep is not None)
+            pc.setReusePreconditioner(False)
+            self.ksp.setOperators(self.K)  # else a KSP set up once does not set up its PC again
+            set_up(self.ksp)  # the splits too: their time is the set-up's
+            pc.setReusePreconditioner(self.keep is not None)
 
         self._fresh(self._clock(factorise))
 

@@ -27,6 +27,7 @@ __all__ = [
     "refactorisation_memory",
     "refactorisation_shortfall",
     "refuse_refactorisation",
+    "set_up",
 ]
 
 #: Sparse direct solve by MUMPS (the factorisation is kept and reused).
@@ -191,15 +192,23 @@ def make_ksp(
             if key.startswith("mat_mumps_icntl_") and prefix + key in added:
                 pc.getFactorMatrix().setMumpsIcntl(int(key.rsplit("_", 1)[1]), int(value))
     if setup:
-        ksp.setUp()
-        # a split's block is factorised at its own set-up, which PCFIELDSPLIT leaves to the
-        # first solve, and MUMPS reads its options there (ICNTL(7), ``pc_precision``): set
-        # the splits up while their options are in the database
-        for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
-            sub.setUp()
+        # with its splits: MUMPS reads their options (ICNTL(7), ``pc_precision``) when it
+        # factorises them, which must happen while those are in the database
+        set_up(ksp)
     for name in added:
         database.delValue(name)
     return ksp
+
+
+def set_up(ksp: PETSc.KSP) -> None:
+    """Set ``ksp`` up (factorise it), a field split's blocks at once.
+
+    PCFIELDSPLIT leaves each block's set-up (its factorisation) to the first solve.
+    """
+    ksp.setUp()
+    pc = ksp.getPC()
+    for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
+        sub.setUp()
 
 
 def factorise(
