@@ -9,7 +9,9 @@ strip corrector (its rows and columns restricted to strips along the contacts).
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +22,15 @@ from petsc4py import PETSc
 from subdomain_contact.solvers import destroy
 from subdomain_contact.system import System
 
-__all__ = ["Layout", "merged_matrix", "same_pattern", "unassembled_matrix"]
+__all__ = [
+    "MERGE_BYTES",
+    "Csr",
+    "Layout",
+    "merged_csr",
+    "merged_matrix",
+    "same_pattern",
+    "unassembled_matrix",
+]
 
 
 class Layout:
@@ -31,6 +41,8 @@ class Layout:
         offsets = np.cumsum([0, *comm.allgather(system.local_size)])
         self.size, self.mine = int(offsets[-1]), int(offsets[comm.rank])
         first = int(offsets[0]) + comm.bcast(system.master_slice.start, root=0)
+        #: global index of the first master (rank 0 holds the master rows)
+        self.first_master = first
         ends = np.cumsum([0, *system.sizes.values()])
         #: interface -> global index of its first master
         self.master_at = {k: first + int(e) for k, e in zip(system.sizes, ends[:-1], strict=True)}
@@ -66,7 +78,7 @@ def _body_entries(
     are expanded to triples; with ``reach`` too, the entries to the body's dropped columns
     are lumped on the row's node (:func:`_lumped`) instead of dropped.
     """
-    body = system.bodies[name]
+    body, masters = system.bodies[name], []
     indptr, indices, data = body.whole_matrix().getValuesCSR()
     first_row = layout.mine + system.slices[name].start
     counts = np.diff(indptr)
@@ -82,14 +94,26 @@ def _body_entries(
             local = np.repeat(np.flatnonzero(picked), counts[picked])
             rows.append(_lumped(system, layout, name, place, local, indices[entries],
                                 data[entries], reach))  # fmt: skip
-    masters = []
     kept = layout.body(name, body.kept)
     owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
     free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
     for k in body.layers:
+        B = body.blocks[k]["BP"][free].tocoo()
+        rows.append((kept[free][B.row], layout.master_at[k] + B.col, B.data))
+    _master_entries(system, layout, name, masters)
+    if place is not None:
+        rows, masters = _restricted(rows, place), _restricted(masters, place)
+    return rows, masters
+
+
+def _master_entries(
+    system: System, layout: Layout, name: str, masters: list[Entries]
+) -> list[Entries]:
+    """Append a body's share of the master rows to ``masters`` (its first rank only)."""
+    body = system.bodies[name]
+    kept = layout.body(name, body.kept)
+    for k in body.layers:
         blocks, at = body.blocks[k], layout.master_at[k]
-        B = blocks["BP"][free].tocoo()
-        rows.append((kept[free][B.row], at + B.col, B.data))
         if body.comm.rank == 0:
             # the parts' entries side by side, summed when the matrix is made: a sparse sum
             # here would drop the entries that happen to cancel or vanish at this state
@@ -112,9 +136,7 @@ def _body_entries(
                 masters.append((at + D.row[both], at + D.col[both], D.data[both]))
             idle = np.flatnonzero(~active)
             masters.append((at + idle, at + idle, np.full(idle.size, 0.5)))
-    if place is not None:
-        rows, masters = _restricted(rows, place), _restricted(masters, place)
-    return rows, masters
+    return masters
 
 
 def _lumped(
@@ -216,6 +238,149 @@ def _aij(
     )
 
 
+#: Bytes a stored entry of the merged matrix takes at the peak of :func:`merged_csr` (its
+#: arrays and temporaries): measured 60 on the collector bar slot (65,900 DOFs, 5.96M
+#: entries, numpy's allocations traced; the COO route took 120), a third more for the
+#: allocator's slack and the rank holding the master rows.
+MERGE_BYTES = 80
+
+#: Entries renumbered or moved at once: bounds the int64 temporaries of the whole-matrix
+#: build (about 32 bytes an entry) to about 32 MB.
+_CHUNK = 1 << 20
+
+
+@dataclass
+class Csr:
+    """This rank's rows of the whole merged matrix in CSR form, columns sorted in each row.
+
+    ``indptr`` and ``indices`` in PETSc's integer type, ``data`` float64; every stored entry
+    of the blocks kept, zeros included. ``pattern``: a digest of every rank's ``indptr``
+    and ``indices``, the same on every rank (two matrices with the same digest store the
+    same entries).
+    """
+
+    indptr: npt.NDArray
+    indices: npt.NDArray
+    data: npt.NDArray
+    pattern: tuple[bytes, ...]
+
+    def matrix(self, comm: MPI.Comm) -> PETSc.Mat:
+        """A new AIJ matrix holding these rows (collective)."""
+        n = (len(self.indptr) - 1, PETSc.DETERMINE)
+        return PETSc.Mat().createAIJ(
+            size=(n, n), csr=(self.indptr, self.indices, self.data), comm=comm
+        )
+
+    def write(self, K: PETSc.Mat) -> None:
+        """Write these values into ``K`` of the same pattern, in place (collective)."""
+        K.setValuesCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.INSERT_VALUES)
+        K.assemble()
+
+
+def _body_rows(system: System, layout: Layout, name: str) -> tuple[int, npt.NDArray, ...]:
+    """A body's rows of the merged matrix: (first local row, indptr, indices, data).
+
+    Its whole matrix ``A`` with the columns renumbered, and ``B_k P_k`` appended to the
+    contact rows (master columns: no entry shared with ``A``'s), columns not yet sorted.
+    About 12 bytes an entry beside the copy of ``A``'s values (the COO route's temporaries
+    had taken about 113: 2.0 GB for the 17.9M entries of the collector bar slot at 205k
+    DOFs).
+    """
+    body = system.bodies[name]
+    indptr, indices, data = body.whole_matrix().getValuesCSR()
+    for start in range(0, indices.size, _CHUNK):
+        part = slice(start, start + _CHUNK)
+        indices[part] = layout.body(name, indices[part])
+    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
+    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
+    rows, columns, values = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
+    for k in body.layers:
+        B = body.blocks[k]["BP"][free].tocoo()
+        rows.append(body.kept[free][B.row] - body.start)
+        columns.append(layout.master_at[k] + B.col)
+        values.append(B.data)
+    rows, columns, values = (np.concatenate(a) for a in (rows, columns, values))
+    order = np.argsort(rows, kind="stable")
+    rows, columns, values = rows[order], columns[order], values[order]
+    # each appended entry after its row's entries (ties in order)
+    indices, data = _spliced((indices, data), indptr[rows + 1], (columns, values))
+    added = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=body.size))])
+    return system.slices[name].start, (indptr + added).astype(PETSc.IntType), indices, data
+
+
+def _spliced(
+    arrays: tuple[npt.NDArray, ...], at: npt.NDArray, inserted: tuple[npt.NDArray, ...]
+) -> list[npt.NDArray]:
+    """``np.insert(a, at, v)`` for each pair of arrays and values, ``at`` sorted.
+
+    Inserted values before ``a[at]``, ties in their order; without ``np.insert``'s index
+    array of every entry (8 bytes an entry): the old entries are moved by chunks.
+    """
+    n = len(arrays[0])
+    out = [np.empty(n + len(at), a.dtype) for a in arrays]
+    for new, values in zip(out, inserted, strict=True):
+        new[at + np.arange(len(at))] = values
+    for start in range(0, n, _CHUNK):
+        old = np.arange(start, min(start + _CHUNK, n))
+        moved = old + np.searchsorted(at, old, side="right")
+        for new, a in zip(out, arrays, strict=True):
+            new[moved] = a[start : start + _CHUNK]
+    return out
+
+
+def merged_csr(system: System) -> Csr:
+    """This rank's rows of the whole merged matrix (:func:`merged_matrix` without rows).
+
+    Built row block by row block, each body's from its matrix's CSR arrays, the master
+    rows (summed over the bodies, rank 0) by sparse COO: about 24 bytes an entry at its peak
+    beside the blocks. Collective.
+    """
+    comm, layout = system.comm, Layout(system)
+    blocks, masters = [], []
+    for name in system.bodies:
+        blocks.append(_body_rows(system, layout, name))
+        parts = _master_entries(system, layout, name, [])
+        if parts:  # compact at once: the master rows hold a third of the slot's entries
+            r, c, v = _concatenate(parts)
+            parts.clear()
+            index = PETSc.IntType
+            masters.append(((r - layout.first_master).astype(index), c.astype(index), v))
+    gathered = comm.gather(masters, root=0)
+    masters.clear()
+    if comm.rank == 0 and system.master_slice.stop > system.master_slice.start:
+        r, c, v = _concatenate([part for parts in gathered for part in parts])
+        gathered.clear()
+        first, n = system.master_slice.start, system.master_slice.stop - system.master_slice.start
+        coo = scipy.sparse.coo_matrix((v, (r, c)), shape=(n, layout.size))
+        del r, c, v
+        csr = coo.tocsr()  # duplicates summed, zeros kept
+        del coo
+        blocks.append((first, csr.indptr.astype(PETSc.IntType),
+                       csr.indices.astype(PETSc.IntType), csr.data))  # fmt: skip
+    blocks.sort(key=lambda block: block[0])
+    starts = np.cumsum([0, *(len(block[1]) - 1 for block in blocks)])
+    if [block[0] for block in blocks] != list(starts[:-1]) or starts[-1] != system.local_size:
+        raise AssertionError(
+            f"merged matrix: row blocks {[(b[0], len(b[1]) - 1) for b in blocks]} on rank "
+            f"{comm.rank} do not tile its {system.local_size} rows"
+        )
+    ends = np.cumsum([0, *(block[2].size for block in blocks)])
+    indptr = np.concatenate(
+        [[0]] + [block[1][1:] + end for block, end in zip(blocks, ends, strict=False)]
+    ).astype(PETSc.IntType)
+    indices = np.concatenate([block[2] for block in blocks]).astype(PETSc.IntType, copy=False)
+    data = np.concatenate([block[3] for block in blocks]).astype(np.float64, copy=False)
+    blocks.clear()
+    csr = scipy.sparse.csr_matrix(
+        (data, indices, indptr), shape=(system.local_size, layout.size), copy=False
+    )
+    csr.sort_indices()  # in place, on these arrays
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(csr.indptr)
+    digest.update(csr.indices)
+    return Csr(csr.indptr, csr.indices, csr.data, tuple(comm.allgather(digest.digest())))
+
+
 def merged_matrix(
     system: System, rows: npt.NDArray | None = None, reach: Mapping[str, float] | None = None
 ) -> PETSc.Mat:
@@ -243,6 +408,8 @@ def merged_matrix(
         else:  # each entry's place by a lookup, not by searching the kept rows
             place = np.full(layout.size, -1, dtype=np.int64)
             place[keep] = np.arange(keep.size)
+    if place is None:
+        return merged_csr(system).matrix(comm)
     entries, masters = [], []
     for name in system.bodies:
         cut = None if place is None or reach is None else reach.get(name)
@@ -253,9 +420,6 @@ def merged_matrix(
     if comm.rank == 0:
         entries += [part for parts in gathered for part in parts]
     r, c, v = _concatenate(entries)
-    if keep is None:
-        n = (system.local_size, PETSc.DETERMINE)
-        return _aij(r - layout.mine, c, v, (system.local_size, layout.size), (n, n), comm)
     first = comm.exscan(len(rows)) or 0
     n = (len(rows), PETSc.DETERMINE)
     return _aij(r - first, c, v, (len(rows), keep.size), (n, n), comm)

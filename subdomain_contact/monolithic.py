@@ -20,7 +20,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.merged import merged_matrix, same_pattern, unassembled_matrix
+from subdomain_contact.merged import MERGE_BYTES, merged_csr, unassembled_matrix
 from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
@@ -28,8 +28,8 @@ from subdomain_contact.solvers import (
     FIELD_SWEEP,
     destroy,
     make_ksp,
+    node_memory,
     ordered,
-    refactorisation_shortfall,
     set_up,
 )
 from subdomain_contact.subdomain import InterfaceResult, Tolerance
@@ -154,6 +154,7 @@ class Monolithic:
         self.reuses = 0
         self._made: Mapping[str, str] = {}  # the options the KSP was made with
         self._shell: PETSc.Mat | None = None  # J applied by the assembled blocks
+        self._pattern: tuple[bytes, ...] = ()  # K's (:class:`~subdomain_contact.merged.Csr`)
         self._stale = False  # the operator has values the factorisation has not seen
         self._factorised = 0.0  # seconds of the last factorisation [s]
         self._first: float | None = None  # seconds of the first solve on it [s]
@@ -229,23 +230,26 @@ class Monolithic:
 
     def _merge(self, system: System) -> None:
         """Merge the blocks into ``K`` and factorise it (in place where the pattern is K's)."""
-        bddc = self._bddc()
-        if self.ksp is not None and refactorisation_shortfall(self.ksp, system.comm):
-            # a new factorisation beside the old one and the new matrix would not fit: free
-            # them first, at the cost of a new analysis (the collector bar slot at 1.14M
-            # DOFs, the split in single precision on 2 ranks: 11.9 GB a rank at the first
-            # factorisation, a rank killed at the second)
-            self.destroy()
-        merged = unassembled_matrix(system) if bddc else merged_matrix(system)
         failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0
-        if self.K is not None and not failed and same_pattern(merged, self.K):
-            # the same sparsity (a new Newton step): MUMPS keeps its analysis
-            merged.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            merged.destroy()
-            self._factorise()
-            return
+        if self._bddc():  # made anew each Newton step (``setup``)
+            merged, pattern = unassembled_matrix(system), ()
+        else:
+            if self.K is not None and merge_shortfall(self.K, system.comm):
+                self.destroy()  # the merge would not fit beside K and its factors
+            rows = merged_csr(system)
+            if self.K is not None and not failed and rows.pattern == self._pattern:
+                # the same sparsity (a new Newton step): the values written into K in
+                # place, and MUMPS keeps its analysis and its workspace (a factorisation made
+                # again in place took no memory beyond the first's, measured)
+                rows.write(self.K)
+                del rows
+                self._factorise()
+                return
+            self.destroy()  # a new pattern: a new analysis, the old factors freed first
+            merged, pattern = rows.matrix(system.comm), rows.pattern
+            del rows
         self.destroy()
-        self.K = merged
+        self.K, self._pattern = merged, pattern
         dim, rows = system.problem.scene.dim, self.K.getSize()[0]
         self._made = ordered(self.options, dim, rows, again=not system.is_linear)
         if self._made.get("pc_type") == "fieldsplit":
@@ -375,7 +379,22 @@ class Monolithic:
     def destroy(self) -> None:
         """Free the merged matrix and its factorisation (collective)."""
         destroy(self.K, self.ksp, self._shell, *(iset for _, iset in self.splits))
-        self.K, self.ksp, self._shell, self.splits = None, None, None, []
+        self.K, self.ksp, self._shell, self.splits, self._pattern = None, None, None, [], ()
+
+
+def merge_shortfall(K: PETSc.Mat, comm: MPI.Comm) -> str | None:
+    """Why merging the next matrix beside ``K`` and its factors would not fit; None if it fits.
+
+    :data:`~subdomain_contact.merged.MERGE_BYTES` for each of K's stored entries against the
+    memory the node shortest of it has left (collective).
+    """
+    need, available = node_memory(MERGE_BYTES * K.getInfo()["nz_used"], comm)
+    if available is None or need <= available:
+        return None
+    return (
+        f"merging the next matrix needs about {need / 1e9:.3g} GB on a node where "
+        f"{available / 1e9:.3g} GB is available"
+    )
 
 
 def _groups(

@@ -22,6 +22,7 @@ __all__ = [
     "destroy",
     "factorise",
     "make_ksp",
+    "node_memory",
     "ordered",
     "ordering",
     "refactorisation_memory",
@@ -292,13 +293,23 @@ def refactorisation_memory(ksp: PETSc.KSP, comm: MPI.Comm) -> tuple[float, float
     factors = _factors(ksp)
     mumps = bool(factors) and all(f.getType() == "mumps" for f in factors)  # else not known
     used = sum(1e6 * f.getMumpsInfo(22) for f in factors) if mumps else 0.0  # MUMPS's MB
+    need, available = node_memory(REFACTORISATION_MARGIN * used, comm)
+    return need, available if mumps else None
+
+
+def node_memory(need: float, comm: MPI.Comm) -> tuple[float, float | None]:
+    """The node shortest of memory where each rank needs ``need`` bytes (collective).
+
+    Returns (the sum of its ranks' needs, its available bytes or None where unknown), the same
+    on every rank.
+    """
     node = comm.Split_type(MPI.COMM_TYPE_SHARED)
-    need = REFACTORISATION_MARGIN * node.allreduce(used)
+    total = node.allreduce(need)
     available = node.bcast(available_memory() if node.rank == 0 else None, root=0)
     node.Free()
-    shortest = available - need if available is not None and mumps else np.inf
+    shortest = available - total if available is not None else np.inf
     worst = comm.allreduce((shortest, comm.rank), op=MPI.MINLOC)[1]
-    return comm.bcast((need, available), root=worst)
+    return comm.bcast((total, available), root=worst)
 
 
 def _factors(ksp: PETSc.KSP) -> list[PETSc.Mat]:

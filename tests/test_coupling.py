@@ -10,9 +10,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
-from subdomain_contact import newton
+from subdomain_contact import merged, newton
 from subdomain_contact import schur as schur_module
-from subdomain_contact.merged import merged_matrix, same_pattern
+from subdomain_contact.merged import merged_csr, merged_matrix, same_pattern
 from subdomain_contact.solvers import destroy
 from verification.cases import (
     bars_scene,
@@ -335,6 +335,44 @@ def test_the_merged_matrix_keeps_its_pattern_from_state_to_state(comm):
     cold.axpy(-1.0, warm)
     assert cold.norm() > 1e-3 * warm.norm()  # the values did change
     destroy(cold, warm)
+
+
+def test_the_merged_rows_of_a_new_state_written_in_place_are_the_new_matrix(comm):
+    """The monolithic solve writes a new Newton step's merged rows into its matrix in place
+    where their pattern digest is the matrix's. Cold and warm states of the squeezed Joule
+    bars: one digest on every rank, and the cold matrix with the warm rows written in is the
+    warm matrix, entry for entry (the same arrays inserted: equal to the bit).
+    """
+    system = make_system(squeezed_joule_bars(bars_scene(8, 2, comm=comm)))
+    system.reset({"temperature": 300.0})
+    system.assemble_jacobian()
+    cold = merged_csr(system)
+    K = cold.matrix(comm)
+    sc.solve(system, sc.Monolithic(), rtol=1e-10)
+    system.assemble_jacobian()
+    warm = merged_csr(system)
+    assert warm.pattern == cold.pattern and len(warm.pattern) == comm.size
+    assert not np.array_equal(warm.data, cold.data)  # the values did change
+    warm.write(K)
+    expected = warm.matrix(comm)
+    a, b = K.getValuesCSR(), expected.getValuesCSR()
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    destroy(K, expected)
+
+
+def test_entries_spliced_by_chunks_are_numpys_insert(monkeypatch):
+    """The whole-matrix build's insertion (moved by chunks, not by an index of every entry)
+    is ``np.insert``: repeated and boundary positions, chunks shorter than the arrays."""
+    monkeypatch.setattr(merged, "_CHUNK", 7)
+    rng = np.random.default_rng(3)
+    a, b = np.arange(50, dtype=np.int32), rng.random(50)
+    at = np.sort(rng.integers(0, 51, size=20))
+    at[:3] = 0  # before the first entry, repeated
+    at[-2:] = 50  # after the last
+    values = (100 + np.arange(20)).astype(np.int32), rng.random(20)
+    got = merged._spliced((a, b), at, values)
+    assert np.array_equal(got[0], np.insert(a, at, values[0]))
+    assert np.array_equal(got[1], np.insert(b, at, values[1]))
 
 
 def test_the_merged_matrix_restricted_to_rows_is_its_submatrix(comm):

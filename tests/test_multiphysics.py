@@ -319,11 +319,11 @@ def test_the_split_solve_in_single_precision_is_the_direct_one(bars):
     assert max(single) <= rows + 1 + 4, (single, rows)
 
 
-def test_a_factorisation_that_would_not_fit_again_is_freed_before_the_next(bars, monkeypatch):
-    """Where a new factorisation would not fit beside the kept one (MUMPS's INFO(22) against
-    the memory left), the monolithic solve frees its matrix and factors before it merges the
-    next matrix, and factorises that anew (a new analysis): the same Newton path and
-    solution, each step's factors made from nothing.
+def test_a_merge_that_would_not_fit_beside_the_factors_frees_them_first(bars, monkeypatch):
+    """Where merging the next matrix would not fit beside the kept one and its factors
+    (``merge_shortfall``: bytes an entry against the memory left), the monolithic solve frees
+    them before it merges, and factorises the new matrix anew (a new analysis): the same
+    Newton path and solution, each step's factors made from nothing.
     """
     system = make_system(squeezed_joule_bars(bars))
     states, results, made, ksps = {}, {}, {}, []
@@ -336,7 +336,7 @@ def test_a_factorisation_that_would_not_fit_again_is_freed_before_the_next(bars,
     monkeypatch.setattr(monolithic, "make_ksp", counted)
     for name in ("kept", "freed"):
         if name == "freed":  # as if every refactorisation fell short of memory
-            monkeypatch.setattr(monolithic, "refactorisation_shortfall", lambda ksp, comm: "x")
+            monkeypatch.setattr(monolithic, "merge_shortfall", lambda K, comm: "x")
         linear = sc.Monolithic(sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL)
         before = len(ksps)
         system.reset({"temperature": 300.0})
@@ -390,8 +390,8 @@ def test_a_kept_factorisation_is_replaced_once_its_extra_iterations_cost_one(
     system = make_system(squeezed_joule_bars(bars))
     states, results, linear, merges = {}, {}, {}, []
     record = _costed(monkeypatch, factorisation)
-    merge = monolithic.merged_matrix
-    monkeypatch.setattr(monolithic, "merged_matrix", lambda s: merges.append(1) or merge(s))
+    merge = monolithic.merged_csr
+    monkeypatch.setattr(monolithic, "merged_csr", lambda s: merges.append(1) or merge(s))
     for name, keep in (("every step", None), ("kept", 1.0)):
         linear[name] = sc.Monolithic(
             sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL, keep=keep
