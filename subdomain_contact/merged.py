@@ -78,7 +78,7 @@ def _body_entries(
     are expanded to triples; with ``reach`` too, the entries to the body's dropped columns
     are lumped on the row's node (:func:`_lumped`) instead of dropped.
     """
-    body, masters = system.bodies[name], []
+    body = system.bodies[name]
     indptr, indices, data = body.whole_matrix().getValuesCSR()
     first_row = layout.mine + system.slices[name].start
     counts = np.diff(indptr)
@@ -94,23 +94,36 @@ def _body_entries(
             local = np.repeat(np.flatnonzero(picked), counts[picked])
             rows.append(_lumped(system, layout, name, place, local, indices[entries],
                                 data[entries], reach))  # fmt: skip
-    kept = layout.body(name, body.kept)
-    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
-    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
-    for k in body.layers:
-        B = body.blocks[k]["BP"][free].tocoo()
-        rows.append((kept[free][B.row], layout.master_at[k] + B.col, B.data))
-    _master_entries(system, layout, name, masters)
+    local, columns, values = _to_masters(system, layout, name)
+    rows.append((first_row + local, columns, values))
+    masters = _master_entries(system, layout, name)
     if place is not None:
         rows, masters = _restricted(rows, place), _restricted(masters, place)
     return rows, masters
 
 
-def _master_entries(
-    system: System, layout: Layout, name: str, masters: list[Entries]
-) -> list[Entries]:
-    """Append a body's share of the master rows to ``masters`` (its first rank only)."""
+def _to_masters(system: System, layout: Layout, name: str) -> Entries:
+    """A body's ``B_k P_k`` on its owned free rows, sorted by row (stable).
+
+    Returns (rows local to the body, global master columns, values).
+    """
     body = system.bodies[name]
+    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
+    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
+    rows, columns, values = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
+    for k in body.layers:
+        B = body.blocks[k]["BP"][free].tocoo()
+        rows.append(body.kept[free][B.row] - body.start)
+        columns.append(layout.master_at[k] + B.col)
+        values.append(B.data)
+    rows, columns, values = (np.concatenate(a) for a in (rows, columns, values))
+    order = np.argsort(rows, kind="stable")
+    return rows[order], columns[order], values[order]
+
+
+def _master_entries(system: System, layout: Layout, name: str) -> list[Entries]:
+    """A body's share of the master rows (given by its first rank only)."""
+    body, masters = system.bodies[name], []
     kept = layout.body(name, body.kept)
     for k in body.layers:
         blocks, at = body.blocks[k], layout.master_at[k]
@@ -282,26 +295,13 @@ def _body_rows(system: System, layout: Layout, name: str) -> tuple[int, npt.NDAr
 
     Its whole matrix ``A`` with the columns renumbered, and ``B_k P_k`` appended to the
     contact rows (master columns: no entry shared with ``A``'s), columns not yet sorted.
-    About 12 bytes an entry beside the copy of ``A``'s values (the COO route's temporaries
-    had taken about 113: 2.0 GB for the 17.9M entries of the collector bar slot at 205k
-    DOFs).
     """
     body = system.bodies[name]
     indptr, indices, data = body.whole_matrix().getValuesCSR()
     for start in range(0, indices.size, _CHUNK):
         part = slice(start, start + _CHUNK)
         indices[part] = layout.body(name, indices[part])
-    owned = np.arange(body.kept_slice.start, body.kept_slice.stop)
-    free = np.setdiff1d(owned, body.fixed_kept)  # a fixed row is its condition alone
-    rows, columns, values = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
-    for k in body.layers:
-        B = body.blocks[k]["BP"][free].tocoo()
-        rows.append(body.kept[free][B.row] - body.start)
-        columns.append(layout.master_at[k] + B.col)
-        values.append(B.data)
-    rows, columns, values = (np.concatenate(a) for a in (rows, columns, values))
-    order = np.argsort(rows, kind="stable")
-    rows, columns, values = rows[order], columns[order], values[order]
+    rows, columns, values = _to_masters(system, layout, name)
     # each appended entry after its row's entries (ties in order)
     indices, data = _spliced((indices, data), indptr[rows + 1], (columns, values))
     added = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=body.size))])
@@ -332,14 +332,14 @@ def merged_csr(system: System) -> Csr:
     """This rank's rows of the whole merged matrix (:func:`merged_matrix` without rows).
 
     Built row block by row block, each body's from its matrix's CSR arrays, the master
-    rows (summed over the bodies, rank 0) by sparse COO: about 24 bytes an entry at its peak
-    beside the blocks. Collective.
+    rows (summed over the bodies, rank 0) by sparse COO: :data:`MERGE_BYTES` an entry at
+    its peak (the COO route of every entry took twice that). Collective.
     """
     comm, layout = system.comm, Layout(system)
     blocks, masters = [], []
     for name in system.bodies:
         blocks.append(_body_rows(system, layout, name))
-        parts = _master_entries(system, layout, name, [])
+        parts = _master_entries(system, layout, name)
         if parts:  # compact at once: the master rows hold a third of the slot's entries
             r, c, v = _concatenate(parts)
             parts.clear()

@@ -231,8 +231,9 @@ class Monolithic:
     def _merge(self, system: System) -> None:
         """Merge the blocks into ``K`` and factorise it (in place where the pattern is K's)."""
         failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0
-        if self._bddc():  # made anew each Newton step (``setup``)
-            merged, pattern = unassembled_matrix(system), ()
+        if self._bddc():  # made anew each Newton step (``setup`` freed the last)
+            self.destroy()
+            self.K, self._pattern = unassembled_matrix(system), ()
         else:
             if self.K is not None and merge_shortfall(self.K, system.comm):
                 self.destroy()  # the merge would not fit beside K and its factors
@@ -246,10 +247,8 @@ class Monolithic:
                 self._factorise()
                 return
             self.destroy()  # a new pattern: a new analysis, the old factors freed first
-            merged, pattern = rows.matrix(system.comm), rows.pattern
+            self.K, self._pattern = rows.matrix(system.comm), rows.pattern
             del rows
-        self.destroy()
-        self.K, self._pattern = merged, pattern
         dim, rows = system.problem.scene.dim, self.K.getSize()[0]
         self._made = ordered(self.options, dim, rows, again=not system.is_linear)
         if self._made.get("pc_type") == "fieldsplit":
