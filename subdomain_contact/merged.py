@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -23,10 +22,9 @@ from subdomain_contact.solvers import destroy
 from subdomain_contact.system import System
 
 __all__ = [
-    "MERGE_BYTES",
-    "Csr",
+    "VALUES_SLACK",
     "Layout",
-    "merged_csr",
+    "MergePlan",
     "merged_matrix",
     "same_pattern",
     "unassembled_matrix",
@@ -251,61 +249,187 @@ def _aij(
     )
 
 
-#: Bytes a stored entry of the merged matrix takes at the peak of :func:`merged_csr` (its
-#: arrays and temporaries): measured 60 on the collector bar slot (65,900 DOFs, 5.96M
-#: entries, numpy's allocations traced; the COO route took 120), a third more for the
-#: allocator's slack and the rank holding the master rows.
-MERGE_BYTES = 80
+#: The allocator's slack over the arrays :meth:`MergePlan.values` holds at its peak
+#: (:attr:`MergePlan.values_bytes`). On the collector bar slot at 65,900 DOFs the arrays
+#: counted came to 26.7 bytes an entry and numpy's allocations traced to 26.1: a third more
+#: for the allocator and the resident set beyond numpy's arrays.
+VALUES_SLACK = 4 / 3
 
 #: Entries renumbered or moved at once: bounds the int64 temporaries of the whole-matrix
 #: build (about 32 bytes an entry) to about 32 MB.
 _CHUNK = 1 << 20
 
+Block = tuple[int, npt.NDArray, npt.NDArray, npt.NDArray]  # first row, indptr, indices, data
 
-@dataclass
-class Csr:
-    """This rank's rows of the whole merged matrix in CSR form, columns sorted in each row.
 
-    ``indptr`` and ``indices`` in PETSc's integer type, ``data`` float64; every stored entry
-    of the blocks kept, zeros included. ``pattern``: a digest of every rank's ``indptr``
-    and ``indices``, the same on every rank (two matrices with the same digest store the
-    same entries).
+def _blocks(system: System, layout: Layout):
+    """This rank's blocks of the merged matrix at the current state, body by body.
+
+    Yields (name, ``A``'s CSR arrays (indptr, indices local to the body, data), ``B_k P_k``
+    as (rows local to the body, global master columns, values), the body's parts of the
+    master rows as (global rows, global columns, values) triples, none but on the body's
+    first rank), every stored entry, zeros included.
+    """
+    for name in system.bodies:
+        A = system.bodies[name].whole_matrix().getValuesCSR()
+        yield name, A, _to_masters(system, layout, name), _master_entries(system, layout, name)
+
+
+def _digest(system: System, layout: Layout):
+    """A digest to be updated with the blocks' index arrays, seeded with the sizes.
+
+    SHA-256: 1.8 GB/s here, blake2b 0.8.
+    """
+    digest = hashlib.sha256()
+    digest.update(np.array([layout.size, system.local_size], dtype=np.int64))
+    return digest
+
+
+class MergePlan:
+    """The whole merged matrix's pattern on this rank, and where each block entry goes in it.
+
+    Made from the blocks at one state: each body's rows (``A`` with its columns renumbered,
+    ``B_k P_k`` spliced onto the contact rows) and the master rows (summed over the bodies,
+    rank 0) with a code for each entry in place of its value, sorted by column in each row,
+    the codes read back as positions. :meth:`values` then scatters the blocks' values at any
+    state whose blocks store the same entries (a digest of every rank's block patterns),
+    with no sort and no COO sum: at 221k DOFs on 2 ranks the merge had taken 1.35 s a
+    Newton step beside its 0.37 s of assembly. Held: the pattern (``indptr``, ``indices``)
+    and the positions, about 8 bytes an entry. Collective.
     """
 
-    indptr: npt.NDArray
-    indices: npt.NDArray
-    data: npt.NDArray
-    pattern: tuple[bytes, ...]
-
-    def matrix(self, comm: MPI.Comm) -> PETSc.Mat:
-        """A new AIJ matrix holding these rows (collective)."""
-        n = (len(self.indptr) - 1, PETSc.DETERMINE)
-        return PETSc.Mat().createAIJ(
-            size=(n, n), csr=(self.indptr, self.indices, self.data), comm=comm
+    def __init__(self, system: System) -> None:
+        comm, layout = system.comm, Layout(system)
+        digest = _digest(system, layout)
+        blocks: list[Block] = []
+        masters = []
+        codes = 0  # this rank's body-row values, in the order of :func:`_blocks`
+        index = PETSc.IntType
+        largest = 0  # bytes of one body's blocks read at once (:attr:`values_bytes`)
+        for name, (indptr, indices, a), (rows, columns, values), parts in _blocks(system, layout):
+            read = (indptr, indices, a, rows, columns, values, *(x for p in parts for x in p))
+            largest = max(largest, sum(x.nbytes for x in read))
+            for array in (indptr, indices, rows, columns, *(x for p in parts for x in p[:2])):
+                digest.update(np.ascontiguousarray(array))
+            for start in range(0, indices.size, _CHUNK):
+                part = slice(start, start + _CHUNK)
+                indices[part] = layout.body(name, indices[part])
+            at = np.arange(codes, codes + a.size, dtype=np.float64)
+            to = np.arange(codes + a.size, codes + a.size + values.size, dtype=np.float64)
+            codes += a.size + values.size
+            # each appended entry after its row's entries (ties in order)
+            indices, at = _spliced((indices, at), indptr[rows + 1], (columns, to))
+            added = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(indptr) - 1))])
+            blocks.append((system.slices[name].start, indptr + added, indices, at))
+            # compact at once: the master rows hold a third of the slot's entries
+            masters += [((r - layout.first_master).astype(index), c.astype(index))
+                        for r, c, _ in parts]  # fmt: skip
+            parts.clear()
+        self.pattern = tuple(comm.allgather(digest.digest()))
+        own = sum(r.size for r, _ in masters)  # this rank's master-row parts' entries
+        self._own, self._counts = own, comm.gather(own, root=0)  # each rank's, on rank 0
+        self._master_of: npt.NDArray | None = None  # rank 0: each master entry's place
+        gathered = comm.gather(masters, root=0)
+        masters.clear()
+        first, stop = system.master_slice.start, system.master_slice.stop
+        if comm.rank == 0 and stop > first:
+            r, c = (np.concatenate([p[i] for ps in gathered for p in ps]) for i in (0, 1))
+            gathered.clear()
+            key = r.astype(np.int64) * layout.size + c
+            del r, c
+            unique, inverse = np.unique(key, return_inverse=True)  # row by row, columns sorted
+            del key
+            self._master_of = inverse.astype(_positions(unique.size))
+            del inverse
+            indptr = np.concatenate(
+                [[0], np.cumsum(np.bincount(unique // layout.size, minlength=stop - first))]
+            )
+            codes_m = np.arange(codes, codes + unique.size, dtype=np.float64)
+            blocks.append((first, indptr, (unique % layout.size).astype(PETSc.IntType), codes_m))
+            del unique
+        blocks.sort(key=lambda block: block[0])
+        starts = np.cumsum([0, *(len(block[1]) - 1 for block in blocks)])
+        if [block[0] for block in blocks] != list(starts[:-1]) or starts[-1] != system.local_size:
+            raise AssertionError(
+                f"merged matrix: row blocks {[(b[0], len(b[1]) - 1) for b in blocks]} on rank "
+                f"{comm.rank} do not tile its {system.local_size} rows"
+            )
+        ends = np.cumsum([0, *(block[2].size for block in blocks)])
+        indptr = np.concatenate(
+            [[0]] + [block[1][1:] + end for block, end in zip(blocks, ends, strict=False)]
+        ).astype(PETSc.IntType)
+        indices = np.concatenate([block[2] for block in blocks]).astype(PETSc.IntType, copy=False)
+        data = np.concatenate([block[3] for block in blocks])
+        blocks.clear()
+        csr = scipy.sparse.csr_matrix(
+            (data, indices, indptr), shape=(system.local_size, layout.size), copy=False
+        )
+        csr.sort_indices()  # in place, on these arrays: the codes follow their entries
+        self.indptr, self.indices = csr.indptr, csr.indices
+        nnz = self.indices.size
+        where = np.empty(nnz, dtype=_positions(nnz))
+        where[csr.data.astype(np.int64)] = np.arange(nnz, dtype=where.dtype)
+        del csr, data
+        self._body_at, self._master_at = where[:codes].copy(), where[codes:].copy()
+        received = sum(self._counts) + self._master_at.size if comm.rank == 0 else 0
+        #: Bytes :meth:`values` holds at its peak on this rank, slack included: the values
+        #: with, in turn, one body's blocks as read and this rank's master-row values so far,
+        #: those values sent (and their parts), or those sent with, on rank 0, all of them
+        #: received and their sums.
+        self.values_bytes = VALUES_SLACK * (
+            8 * nnz + max(largest + 8 * own, 16 * own, 8 * own + 8 * received)
         )
 
-    def write(self, K: PETSc.Mat) -> None:
-        """Write these values into ``K`` of the same pattern, in place (collective)."""
-        K.setValuesCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.INSERT_VALUES)
+    @property
+    def nnz(self) -> int:
+        """This rank's stored entries."""
+        return int(self.indices.size)
+
+    def values(self, system: System) -> npt.NDArray | None:
+        """The merged matrix's values on this rank at the system's state, in the plan's pattern.
+
+        None (on every rank) where the blocks store other entries. Collective.
+        """
+        comm, layout = system.comm, Layout(system)
+        digest = _digest(system, layout)
+        data, at, fits, masters = np.empty(self.nnz), 0, True, []
+        for _, (indptr, indices, a), (rows, columns, values), parts in _blocks(system, layout):
+            for array in (indptr, indices, rows, columns, *(x for p in parts for x in p[:2])):
+                digest.update(np.ascontiguousarray(array))
+            for x in (a, values):
+                fits = fits and at + x.size <= self._body_at.size
+                if fits:
+                    data[self._body_at[at : at + x.size]] = x
+                at += x.size
+            masters.append(np.concatenate([np.zeros(0), *(v for _, _, v in parts)]))
+            parts.clear()
+        fits = fits and at == self._body_at.size
+        send = np.concatenate([np.zeros(0), *masters])
+        masters.clear()
+        seen = comm.allgather((digest.digest(), fits and send.size == self._own))
+        if tuple(d for d, _ in seen) != self.pattern or not all(f for _, f in seen):
+            return None
+        received = np.empty(sum(self._counts)) if comm.rank == 0 else None
+        comm.Gatherv(send, (received, self._counts) if comm.rank == 0 else None, root=0)
+        del send
+        if self._master_of is not None:
+            data[self._master_at] = np.bincount(self._master_of, received, self._master_at.size)
+        return data
+
+    def matrix(self, comm: MPI.Comm, data: npt.NDArray) -> PETSc.Mat:
+        """A new AIJ matrix of the plan's pattern holding ``data`` (collective)."""
+        n = (len(self.indptr) - 1, PETSc.DETERMINE)
+        return PETSc.Mat().createAIJ(size=(n, n), csr=(self.indptr, self.indices, data), comm=comm)
+
+    def write(self, K: PETSc.Mat, data: npt.NDArray) -> None:
+        """Write ``data`` into ``K`` of the plan's pattern, in place (collective)."""
+        K.setValuesCSR(self.indptr, self.indices, data, addv=PETSc.InsertMode.INSERT_VALUES)
         K.assemble()
 
 
-def _body_rows(system: System, layout: Layout, name: str) -> tuple[int, npt.NDArray, ...]:
-    """A body's rows of the merged matrix: (first local row, indptr, indices, data).
-
-    Its whole matrix ``A`` with the columns renumbered, and ``B_k P_k`` appended to the
-    contact rows (master columns: no entry shared with ``A``'s), columns not yet sorted.
-    """
-    body = system.bodies[name]
-    indptr, indices, data = body.whole_matrix().getValuesCSR()
-    for start in range(0, indices.size, _CHUNK):
-        part = slice(start, start + _CHUNK)
-        indices[part] = layout.body(name, indices[part])
-    rows, columns, values = _to_masters(system, layout, name)
-    # each appended entry after its row's entries (ties in order)
-    indices, data = _spliced((indices, data), indptr[rows + 1], (columns, values))
-    added = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=body.size))])
-    return system.slices[name].start, (indptr + added).astype(PETSc.IntType), indices, data
+def _positions(n: int) -> type:
+    """The smallest of int32 and int64 that indexes ``n`` entries."""
+    return np.int32 if n < 2**31 else np.int64
 
 
 def _spliced(
@@ -326,59 +450,6 @@ def _spliced(
         for new, a in zip(out, arrays, strict=True):
             new[moved] = a[start : start + _CHUNK]
     return out
-
-
-def merged_csr(system: System) -> Csr:
-    """This rank's rows of the whole merged matrix (:func:`merged_matrix` without rows).
-
-    Built row block by row block, each body's from its matrix's CSR arrays, the master
-    rows (summed over the bodies, rank 0) by sparse COO: :data:`MERGE_BYTES` an entry at
-    its peak (the COO route of every entry took twice that). Collective.
-    """
-    comm, layout = system.comm, Layout(system)
-    blocks, masters = [], []
-    for name in system.bodies:
-        blocks.append(_body_rows(system, layout, name))
-        parts = _master_entries(system, layout, name)
-        if parts:  # compact at once: the master rows hold a third of the slot's entries
-            r, c, v = _concatenate(parts)
-            parts.clear()
-            index = PETSc.IntType
-            masters.append(((r - layout.first_master).astype(index), c.astype(index), v))
-    gathered = comm.gather(masters, root=0)
-    masters.clear()
-    if comm.rank == 0 and system.master_slice.stop > system.master_slice.start:
-        r, c, v = _concatenate([part for parts in gathered for part in parts])
-        gathered.clear()
-        first, n = system.master_slice.start, system.master_slice.stop - system.master_slice.start
-        coo = scipy.sparse.coo_matrix((v, (r, c)), shape=(n, layout.size))
-        del r, c, v
-        csr = coo.tocsr()  # duplicates summed, zeros kept
-        del coo
-        blocks.append((first, csr.indptr.astype(PETSc.IntType),
-                       csr.indices.astype(PETSc.IntType), csr.data))  # fmt: skip
-    blocks.sort(key=lambda block: block[0])
-    starts = np.cumsum([0, *(len(block[1]) - 1 for block in blocks)])
-    if [block[0] for block in blocks] != list(starts[:-1]) or starts[-1] != system.local_size:
-        raise AssertionError(
-            f"merged matrix: row blocks {[(b[0], len(b[1]) - 1) for b in blocks]} on rank "
-            f"{comm.rank} do not tile its {system.local_size} rows"
-        )
-    ends = np.cumsum([0, *(block[2].size for block in blocks)])
-    indptr = np.concatenate(
-        [[0]] + [block[1][1:] + end for block, end in zip(blocks, ends, strict=False)]
-    ).astype(PETSc.IntType)
-    indices = np.concatenate([block[2] for block in blocks]).astype(PETSc.IntType, copy=False)
-    data = np.concatenate([block[3] for block in blocks]).astype(np.float64, copy=False)
-    blocks.clear()
-    csr = scipy.sparse.csr_matrix(
-        (data, indices, indptr), shape=(system.local_size, layout.size), copy=False
-    )
-    csr.sort_indices()  # in place, on these arrays
-    digest = hashlib.blake2b(digest_size=16)
-    digest.update(csr.indptr)
-    digest.update(csr.indices)
-    return Csr(csr.indptr, csr.indices, csr.data, tuple(comm.allgather(digest.digest())))
 
 
 def merged_matrix(
@@ -409,7 +480,8 @@ def merged_matrix(
             place = np.full(layout.size, -1, dtype=np.int64)
             place[keep] = np.arange(keep.size)
     if place is None:
-        return merged_csr(system).matrix(comm)
+        plan = MergePlan(system)
+        return plan.matrix(comm, plan.values(system))
     entries, masters = [], []
     for name in system.bodies:
         cut = None if place is None or reach is None else reach.get(name)

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.merged import MERGE_BYTES, merged_csr, unassembled_matrix
+from subdomain_contact.merged import MergePlan, unassembled_matrix
 from subdomain_contact.modes import centre, modes, span
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
@@ -154,7 +154,7 @@ class Monolithic:
         self.reuses = 0
         self._made: Mapping[str, str] = {}  # the options the KSP was made with
         self._shell: PETSc.Mat | None = None  # J applied by the assembled blocks
-        self._pattern: tuple[bytes, ...] = ()  # K's (:class:`~subdomain_contact.merged.Csr`)
+        self._plan: MergePlan | None = None  # K's pattern, and where the blocks go in it
         self._stale = False  # the operator has values the factorisation has not seen
         self._factorised = 0.0  # seconds of the last factorisation [s]
         self._first: float | None = None  # seconds of the first solve on it [s]
@@ -233,22 +233,26 @@ class Monolithic:
         failed = self.ksp is not None and self.ksp.getPC().getFailedReason() != 0
         if self._bddc():  # made anew each Newton step (``setup`` freed the last)
             self.destroy()
-            self.K, self._pattern = unassembled_matrix(system), ()
+            self.K = unassembled_matrix(system)
         else:
-            if self.K is not None and merge_shortfall(self.K, system.comm):
-                self.destroy()  # the merge would not fit beside K and its factors
-            rows = merged_csr(system)
-            if self.K is not None and not failed and rows.pattern == self._pattern:
+            if self.K is not None and self._plan and merge_shortfall(self._plan, system.comm):
+                self._free()  # the values would not fit beside K and its factors
+            data = self._plan.values(system) if self._plan is not None else None
+            if data is not None and self.K is not None and not failed:
                 # the same sparsity (a new Newton step): the values written into K in
                 # place, and MUMPS keeps its analysis and its workspace (a factorisation made
                 # again in place took no memory beyond the first's, measured)
-                rows.write(self.K)
-                del rows
+                self._plan.write(self.K, data)
+                del data
                 self._factorise()
                 return
-            self.destroy()  # a new pattern: a new analysis, the old factors freed first
-            self.K, self._pattern = rows.matrix(system.comm), rows.pattern
-            del rows
+            self._free()  # a new matrix: a new analysis, the old factors freed first
+            if data is None:  # a new pattern
+                self._plan = None
+                self._plan = MergePlan(system)
+                data = self._plan.values(system)
+            self.K = self._plan.matrix(system.comm, data)
+            del data
         dim, rows = system.problem.scene.dim, self.K.getSize()[0]
         self._made = ordered(self.options, dim, rows, again=not system.is_linear)
         if self._made.get("pc_type") == "fieldsplit":
@@ -375,23 +379,28 @@ class Monolithic:
 
         return converged
 
-    def destroy(self) -> None:
-        """Free the merged matrix and its factorisation (collective)."""
+    def _free(self) -> None:
+        """Free the merged matrix and its factorisation, the plan of its pattern kept."""
         destroy(self.K, self.ksp, self._shell, *(iset for _, iset in self.splits))
-        self.K, self.ksp, self._shell, self.splits, self._pattern = None, None, None, [], ()
+        self.K, self.ksp, self._shell, self.splits = None, None, None, []
+
+    def destroy(self) -> None:
+        """Free the merged matrix, its factorisation and its pattern's plan (collective)."""
+        self._free()
+        self._plan = None
 
 
-def merge_shortfall(K: PETSc.Mat, comm: MPI.Comm) -> str | None:
-    """Why merging the next matrix beside ``K`` and its factors would not fit; None if it fits.
+def merge_shortfall(plan: MergePlan, comm: MPI.Comm) -> str | None:
+    """Why the next state's values would not fit beside the matrix and its factors, or None.
 
-    :data:`~subdomain_contact.merged.MERGE_BYTES` for each of K's stored entries against the
-    memory the node shortest of it has left (collective).
+    The plan's :attr:`~subdomain_contact.merged.MergePlan.values_bytes` against the memory
+    the node shortest of it has left (collective).
     """
-    need, available = node_memory(MERGE_BYTES * K.getInfo()["nz_used"], comm)
+    need, available = node_memory(plan.values_bytes, comm)
     if available is None or need <= available:
         return None
     return (
-        f"merging the next matrix needs about {need / 1e9:.3g} GB on a node where "
+        f"writing the next matrix's values needs about {need / 1e9:.3g} GB on a node where "
         f"{available / 1e9:.3g} GB is available"
     )
 

@@ -12,7 +12,7 @@ from petsc4py import PETSc
 import subdomain_contact as sc
 from subdomain_contact import merged, newton
 from subdomain_contact import schur as schur_module
-from subdomain_contact.merged import merged_csr, merged_matrix, same_pattern
+from subdomain_contact.merged import MergePlan, merged_matrix, same_pattern
 from subdomain_contact.solvers import destroy
 from verification.cases import (
     bars_scene,
@@ -337,26 +337,42 @@ def test_the_merged_matrix_keeps_its_pattern_from_state_to_state(comm):
     destroy(cold, warm)
 
 
-def test_the_merged_rows_of_a_new_state_written_in_place_are_the_new_matrix(comm):
-    """The monolithic solve writes a new Newton step's merged rows into its matrix in place
-    where their pattern digest is the matrix's. Cold and warm states of the squeezed Joule
-    bars: one digest on every rank, and the cold matrix with the warm rows written in is the
-    warm matrix, entry for entry (the same arrays inserted: equal to the bit).
+def test_the_merged_values_of_a_new_state_written_in_place_are_the_new_matrix(comm, monkeypatch):
+    """The monolithic solve plans the merged matrix's pattern once (:class:`MergePlan`) and
+    scatters a new Newton step's block values into it. Cold and warm states of the squeezed
+    Joule bars: the plan made at the cold state takes the warm values (one digest on every
+    rank), and the cold matrix with them written in is the matrix of a plan made at the warm
+    state, entry for entry: the scatter is the sort it replaces (the master rows' parts
+    summed in the same order: equal to the bit). A block with another pattern is refused.
     """
     system = make_system(squeezed_joule_bars(bars_scene(8, 2, comm=comm)))
     system.reset({"temperature": 300.0})
     system.assemble_jacobian()
-    cold = merged_csr(system)
-    K = cold.matrix(comm)
+    plan = MergePlan(system)
+    cold = plan.values(system)
+    K = plan.matrix(comm, cold)
     sc.solve(system, sc.Monolithic(), rtol=1e-10)
     system.assemble_jacobian()
-    warm = merged_csr(system)
-    assert warm.pattern == cold.pattern and len(warm.pattern) == comm.size
-    assert not np.array_equal(warm.data, cold.data)  # the values did change
-    warm.write(K)
-    expected = warm.matrix(comm)
+    warm = plan.values(system)
+    assert warm is not None and len(plan.pattern) == comm.size
+    assert not np.array_equal(warm, cold)  # the values did change
+    plan.write(K, warm)
+    fresh = MergePlan(system)
+    assert fresh.pattern == plan.pattern
+    expected = fresh.matrix(comm, fresh.values(system))
     a, b = K.getValuesCSR(), expected.getValuesCSR()
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    # one entry fewer in rank 0's B_k P_k rows: every rank refuses the plan
+    original = merged._to_masters
+
+    def fewer(*args):
+        rows, columns, values = original(*args)
+        if comm.rank == 0 and rows.size:
+            return rows[:-1], columns[:-1], values[:-1]
+        return rows, columns, values
+
+    monkeypatch.setattr(merged, "_to_masters", fewer)
+    assert plan.values(system) is None
     destroy(K, expected)
 
 

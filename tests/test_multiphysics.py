@@ -336,7 +336,7 @@ def test_a_merge_that_would_not_fit_beside_the_factors_frees_them_first(bars, mo
     monkeypatch.setattr(monolithic, "make_ksp", counted)
     for name in ("kept", "freed"):
         if name == "freed":  # as if every refactorisation fell short of memory
-            monkeypatch.setattr(monolithic, "merge_shortfall", lambda K, comm: "x")
+            monkeypatch.setattr(monolithic, "merge_shortfall", lambda plan, comm: "x")
         linear = sc.Monolithic(sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL)
         before = len(ksps)
         system.reset({"temperature": 300.0})
@@ -390,8 +390,10 @@ def test_a_kept_factorisation_is_replaced_once_its_extra_iterations_cost_one(
     system = make_system(squeezed_joule_bars(bars))
     states, results, linear, merges = {}, {}, {}, []
     record = _costed(monkeypatch, factorisation)
-    merge = monolithic.merged_csr
-    monkeypatch.setattr(monolithic, "merged_csr", lambda s: merges.append(1) or merge(s))
+    values = monolithic.MergePlan.values
+    monkeypatch.setattr(
+        monolithic.MergePlan, "values", lambda plan, s: merges.append(1) or values(plan, s)
+    )
     for name, keep in (("every step", None), ("kept", 1.0)):
         linear[name] = sc.Monolithic(
             sc.FIELDSPLIT_DIRECT, splits=sc.THERMOELECTRIC_MECHANICAL, keep=keep
