@@ -248,7 +248,7 @@ class Monolithic:
                 return
             self._free()  # a new matrix: a new analysis, the old factors freed first
             if data is None:  # a new pattern
-                self._plan = None
+                self._plan = None  # the old plan freed before the new one is made
                 self._plan = MergePlan(system)
                 data = self._plan.values(system)
             self.K = self._plan.matrix(system.comm, data)

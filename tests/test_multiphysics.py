@@ -320,10 +320,10 @@ def test_the_split_solve_in_single_precision_is_the_direct_one(bars):
 
 
 def test_a_merge_that_would_not_fit_beside_the_factors_frees_them_first(bars, monkeypatch):
-    """Where merging the next matrix would not fit beside the kept one and its factors
-    (``merge_shortfall``: bytes an entry against the memory left), the monolithic solve frees
-    them before it merges, and factorises the new matrix anew (a new analysis): the same
-    Newton path and solution, each step's factors made from nothing.
+    """Where the next matrix's values would not fit beside the kept one and its factors
+    (``merge_shortfall``: the plan's ``values_bytes`` against the memory left), the monolithic
+    solve frees them before it writes the values, and factorises the new matrix anew (a new
+    analysis): the same Newton path and solution, each step's factors made from nothing.
     """
     system = make_system(squeezed_joule_bars(bars))
     states, results, made, ksps = {}, {}, {}, []
