@@ -75,8 +75,8 @@ parser.add_argument(
     default=["subdomain", "monolithic"],
     choices=["subdomain", "monolithic", "split", "split_single"],
     help="linear solvers of Newton (split: the monolithic Newton by GMRES on a sweep over "
-    "(T, φ), then u, each factorised; split_single: each factorised in single precision, "
-    "half the memory, for ≥ 1M DOFs)",
+    "(T, φ), then u, each factorised; split_single: each factorised in single precision and "
+    "block low-rank, less than half the memory, for ≥ 1M DOFs)",
 )
 parser.add_argument(
     "--setups", nargs="+", default=["constant", "pressure"], help="contact setups to run"

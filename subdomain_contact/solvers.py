@@ -11,6 +11,7 @@ from petsc4py import PETSc
 
 __all__ = [
     "AMD_ROWS",
+    "BLOCK_LOW_RANK",
     "DIRECT",
     "FIELDSPLIT_DIRECT",
     "FIELDSPLIT_SINGLE",
@@ -78,14 +79,34 @@ FIELDSPLIT_DIRECT: Mapping[str, str] = MappingProxyType(
     }
 )
 
+#: Block low-rank factors (MUMPS's BLR, ICNTL(35) = 2, in the factorisation and the solve;
+#: the UCFS variant, ICNTL(36) = 1, compressing before the updates) at a dropping threshold
+#: CNTL(7) of 1e-6: about 17 times single precision's ε (6e-8), so the factors' error stays
+#: of the order the precision leaves. Measured on the collector bar slot at 1,217,760 DOFs
+#: (2 ranks, 2026-12-03, one run each): the two splits factorised again in place in 47–49 s
+#: against 115–121 s full-rank (analysis included; the full-rank factors left no room to
+#: refactorise in place), 12–21 GMRES iterations a step and one solve on from the iterate
+#: (:meth:`Monolithic._krylov <subdomain_contact.monolithic.Monolithic._krylov>`), the same
+#: Newton residuals to two digits. At 1e-4 it was not reliable: 424 and 337 iterations at
+#: two steps.
+BLOCK_LOW_RANK: Mapping[str, str] = MappingProxyType(
+    {"mat_mumps_icntl_35": "2", "mat_mumps_icntl_36": "1", "mat_mumps_cntl_7": "1e-6"}
+)
+
 #: :data:`FIELDSPLIT_DIRECT` with each split factorised in single precision (MUMPS's own,
-#: PETSc's ``pc_precision``): about half the factors' memory and work, where the double ones
-#: do not fit (the collector bar slot at 1.14M DOFs: two ranks past 11 GB each). GMRES on the
-#: true residual (rtol 1e-12) makes up for the precision: the slot at 17,335 DOFs, nested
-#: from 5,595, 5–8 iterations a step against 1–4, the same voltage drop (179.64 mV).
+#: PETSc's ``pc_precision``) and block low-rank (:data:`BLOCK_LOW_RANK`): about half the
+#: factors' memory and work by the precision, less than half the rest by BLR, where the
+#: double ones do not fit (the collector bar slot at 1.14M DOFs: two ranks past 11 GB each).
+#: GMRES on the true residual (rtol 1e-12) makes up for both: the slot at 17,335 DOFs, nested
+#: from 5,595, 5–8 iterations a step against 1–4 (single, full-rank), the same voltage drop
+#: (179.64 mV); at 1.2M DOFs the fine level in 639 s against 1,059 s (single, full-rank).
 FIELDSPLIT_SINGLE: Mapping[str, str] = MappingProxyType(
     FIELDSPLIT_DIRECT
-    | {f"fieldsplit_{split}_pc_precision": "single" for split in THERMOELECTRIC_MECHANICAL}
+    | {
+        f"fieldsplit_{split}_{k}": v
+        for split in THERMOELECTRIC_MECHANICAL
+        for k, v in ({"pc_precision": "single"} | BLOCK_LOW_RANK).items()
+    }
 )
 
 #: One sweep of :data:`FIELDSPLIT_DIRECT`, no Krylov: an approximate inverse that is exact but
