@@ -381,7 +381,7 @@ class Monolithic:
             return seconds, iterations
         rtol, atol, _, _ = ksp.getTolerances()
         # the floor of any solve in double: the product's round-off, ε ‖K‖_F ‖x‖ (≥ ε ‖K‖₂ ‖x‖)
-        scale = np.finfo(float).eps * self.K.norm(PETSc.NormType.FROBENIUS)
+        scale = np.finfo(float).eps * _frobenius_bound(self.K)
         residual = rhs.duplicate()
         guess = ksp.getInitialGuessNonzero()
         while ksp.getConvergedReason() > 0 and restarts < TRUE_RESIDUAL_RESTARTS:
@@ -434,6 +434,15 @@ class Monolithic:
 TRUE_RESIDUAL_MARGIN = 10.0
 #: Solves on from the iterate at most, after the first (each converges by its recurrence).
 TRUE_RESIDUAL_RESTARTS = 3
+
+
+def _frobenius_bound(K: PETSc.Mat) -> float:
+    """‖K‖_F, or for an unassembled (MATIS) matrix the sum of its local matrices' (≥ it)."""
+    frobenius = PETSc.NormType.FROBENIUS
+    if K.getType() != PETSc.Mat.Type.IS:
+        return K.norm(frobenius)
+    local = K.getISLocalMat().norm(frobenius)
+    return K.getComm().tompi4py().allreduce(local)
 
 
 def merge_shortfall(plan: MergePlan, comm: MPI.Comm) -> str | None:
