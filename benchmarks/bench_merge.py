@@ -22,7 +22,6 @@ Run: ``./dev python benchmarks/bench_merge.py [--size 0.06 --fine 0.02]`` (seria
 noisy; compare ratios.
 """
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -33,21 +32,16 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from slot_demo import slot_demo
+from slot_demo import slot_parser, warm_slot
 
-parser = argparse.ArgumentParser(description=__doc__)
-parser.add_argument("--size", type=float, default=0.06, help="element size away from the slot [m]")
-parser.add_argument("--fine", type=float, default=0.02, help="element size on the contacts [m]")
+parser = slot_parser(__doc__)
 parser.add_argument("--repeat", type=int, default=3, help="timings of each, the best kept")
 args = parser.parse_args()
 
-demo = slot_demo("--size", str(args.size), "--fine", str(args.fine))
+demo, system = warm_slot(args.size, args.fine)
 sc, comm = demo["sc"], MPI.COMM_WORLD
 from subdomain_contact import merged
 
-system = sc.System(demo["problem"](demo["load"](0.16), "constant"))
-system.reset({"temperature": 1000.0})  # warm: the contacts' laws away from their cold values
-system.assemble_jacobian()
 for body in system.bodies.values():
     body.whole_matrix()  # assembled here, not in the timings
 

@@ -19,7 +19,6 @@ Run: ``./dev python benchmarks/bench_split_factor.py [--size 0.06 --fine 0.02]``
 under ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``. Not a test: compare ratios.
 """
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -29,23 +28,18 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from slot_demo import slot_demo
+from slot_demo import slot_parser, warm_slot
 
-parser = argparse.ArgumentParser(description=__doc__)
-parser.add_argument("--size", type=float, default=0.06, help="element size away from the slot [m]")
-parser.add_argument("--fine", type=float, default=0.02, help="element size on the contacts [m]")
+parser = slot_parser(__doc__)
 parser.add_argument("--repeat", type=int, default=2, help="timings of each, the best kept")
 args = parser.parse_args()
 
-demo = slot_demo("--size", str(args.size), "--fine", str(args.fine))
+demo, system = warm_slot(args.size, args.fine)
 sc, comm = demo["sc"], MPI.COMM_WORLD
 from subdomain_contact import merged
 from subdomain_contact.monolithic import field_splits
 from subdomain_contact.solvers import destroy, make_ksp, set_up
 
-system = sc.System(demo["problem"](demo["load"](0.16), "constant"))
-system.reset({"temperature": 1000.0})  # warm: the contacts' laws away from their cold values
-system.assemble_jacobian()
 plan = merged.MergePlan(system)
 K = plan.matrix(comm, plan.values(system))
 splits = field_splits(system, sc.THERMOELECTRIC_MECHANICAL)
