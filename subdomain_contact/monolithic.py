@@ -331,7 +331,8 @@ class Monolithic:
         limit = self.ksp.getTolerances()[3]
         if self._stale:  # no more iterations than the rest of the budget pays for
             self.ksp.setTolerances(max_it=self._stale_limit(limit))
-        seconds, iterations = self._krylov(rhs, x)
+        seconds, counted = self._krylov(rhs, x)
+        iterations = counted
         self.ksp.setTolerances(max_it=limit)
         reason = self.ksp.getConvergedReason()
         if reason >= 0 and self._stale:
@@ -340,11 +341,11 @@ class Monolithic:
             self._merge(self.system)
             if self.inexact and tolerance.atol is not None:
                 self.ksp.setConvergenceTest(self._per_field(dict(tolerance.atol)))
-            seconds, more = self._krylov(rhs, x)
+            seconds, counted = self._krylov(rhs, x)
             reason = self.ksp.getConvergedReason()
-            iterations += more
-        if self._first is None:
-            self._first, self._first_iterations = seconds, max(1, self.ksp.getIterationNumber())
+            iterations += counted
+        if self._first is None:  # the time and iterations of the solve on this factorisation
+            self._first, self._first_iterations = seconds, max(1, counted)
         else:
             self._excess += max(0.0, seconds - self._first)
         residual, correction = self.K.createVecs()
@@ -380,15 +381,18 @@ class Monolithic:
         if ksp.getType() == "preonly" or self.inexact:  # the inexact test is on it already
             return seconds, iterations
         rtol, atol, _, _ = ksp.getTolerances()
-        # the floor of any solve in double: the product's round-off, ε ‖K‖_F ‖x‖ (≥ ε ‖K‖₂ ‖x‖)
-        scale = np.finfo(float).eps * _frobenius_bound(self.K)
+        tolerance, floor = max(rtol * rhs.norm(), atol), None
         residual = rhs.duplicate()
         guess = ksp.getInitialGuessNonzero()
         while ksp.getConvergedReason() > 0 and restarts < TRUE_RESIDUAL_RESTARTS:
             ksp.getOperators()[0].mult(x, residual)
             residual.aypx(-1.0, rhs)
-            target = max(rtol * rhs.norm(), atol, scale * x.norm())
-            if residual.norm() <= TRUE_RESIDUAL_MARGIN * target:
+            norm = residual.norm()
+            if norm <= TRUE_RESIDUAL_MARGIN * tolerance:
+                break
+            if floor is None:  # the product's round-off, ε ‖K‖_F (≥ ε ‖K‖₂), only where needed
+                floor = np.finfo(float).eps * _frobenius_bound(self.K)
+            if norm <= TRUE_RESIDUAL_MARGIN * floor * x.norm():
                 break
             restarts += 1
             ksp.setInitialGuessNonzero(True)
