@@ -9,7 +9,8 @@ with ``L_k`` the half-link's block on the body (slave rows and columns only) and
 coupling to the masters. Its share of the master residual of interface k is
 ``r_k = P_kᵀ (C_k y + D_k P_k y_k)``. The half-link's fluxes appear in both with opposite
 signs, so ``C_k = −L_k + C̃_k`` and ``D_k = −B_k + D̃_k`` where the remainders C̃, D̃ (the
-contact's Joule heat) are small; likewise ``B_k P_k = (−L_k + B̃_k) P_k`` with ``B̃_k`` the
+contact's Joule heat, and at an open contact the master's tie less the body's) are small;
+likewise ``B_k P_k = (−L_k + B̃_k) P_k`` with ``B̃_k`` the
 coupling at a fixed jump (:class:`~subdomain_contact.physics.BodyForms`).
 
 Every one of these blocks lives on the *contact DOFs* (every field on the contact facets), a
@@ -255,9 +256,9 @@ class Body:
                 "L": ufl.derivative(self._linearised[k], U, trial),
                 "B": ufl.derivative(self._linearised[k], Um, trial),
             }
-            if f.remainders[k] is not None:
-                blocks[k]["Ct"] = ufl.derivative(f.remainders[k], U, trial)
-                blocks[k]["Dt"] = ufl.derivative(f.remainders[k], Um, trial)
+            if f.master_only[k] is not None:
+                blocks[k]["Ct"] = ufl.derivative(f.master_only[k], U, trial)
+                blocks[k]["Dt"] = ufl.derivative(f.master_only[k], Um, trial)
         self.links_are_linear = not any(
             _depends_on(form, unknowns) for forms in blocks.values() for form in forms.values()
         )
@@ -410,25 +411,29 @@ class Body:
         self._bulk_norms = bulk
 
     def master_stiffness(self, k: str) -> tuple[Vector, Vector]:
-        """Per master DOF of k: the half-link's stiffness at its slave, and the bulk's.
+        """Per master DOF of k: the half-link's stiffness at it, and the bulk's at its slave.
 
-        Orders of magnitude (row sums), [W/K], [S] or [N/m], replicated. The link's is its
-        row sum; for a displacement, the smallest eigenvalue of the node's lumped block over
-        the components, given to each of them: an open contact ties the normal alone (1e-9
-        of the contact's stiffness) where a stuck one's slip spring holds the tangents. The
-        bulk's is the largest row sum on the slave's field (:meth:`_bulk_norms_by_field`).
+        Orders of magnitude (row sums), [W/K], [S] or [N/m], replicated. The link's is the
+        row sum of its master block ``P_kᵀ D_k P_k`` (at an open contact the master's own
+        tie, ``physics.MASTER_TIE``); for a displacement, the smallest eigenvalue of the
+        node's lumped block over the components, given to each of them: an open contact
+        ties the normal alone where a stuck one's slip spring holds the tangents. The bulk's
+        is the largest row sum on the slave's field (:meth:`_bulk_norms_by_field`).
         """
-        position, layer, L = self.position[k], self.layers[k], self.blocks[k]["L"]
-        link = self._link_rows(k)[position]
+        position, layer = self.position[k], self.layers[k]
+        D = -self.blocks[k]["BP"][position, :]
+        if "DtP" in self.blocks[k]:
+            D = D + self.blocks[k]["DtP"]
+        link = np.abs(D).sum(axis=1).A1
         nodes = layer.nodes
         u = [c for c, (f, _) in enumerate(layer.channels) if f == "displacement"]
         if u:
-            rows = [position[c * nodes : (c + 1) * nodes] for c in u]
+            rows = [np.arange(c * nodes, (c + 1) * nodes) for c in u]
             lumped = np.zeros((nodes, len(u), len(u)))
             for b, columns in enumerate(rows):
-                ones = np.zeros(L.shape[1])
+                ones = np.zeros(D.shape[1])
                 ones[columns] = 1.0
-                summed = L @ ones
+                summed = D @ ones
                 for a, at in enumerate(rows):
                     lumped[:, a, b] = summed[at]
             smallest = np.linalg.eigvalsh(0.5 * (lumped + lumped.transpose(0, 2, 1)))[:, 0]

@@ -13,15 +13,16 @@ body α at Γ_k (METHOD.md §2), with n the body's outward normal and the jump `
 - current ḡ j_φ, ḡ = 2 g(p, T_m), and the Joule heat ḡ j_φ² deposited on the slave side;
 - normal pressure p = P(⟨2 j_u·n − gap⟩) (unilateral, P the closure law of the whole contact);
   tangential traction 2 k_n j_t when stuck, none when free. An open side transmits nothing to
-  the body; a tiny tie holds its master to the slave (``ties``).
+  the body; a tiny tie in the body's Newton matrix (``ties``) and a stiffer one in the master
+  equation (:data:`MASTER_TIE`) hold its master to the slave.
 
 Residuals are internal minus external. The body residual holds the half-links tested with the
 body's test function; the master residual of Γ_k holds minus the same fluxes (Joule heat
-excluded, the tie included), tested with the master test function, which on body α is the
-test function at the slave DOFs. The two differ by the Joule heat the half-link deposits on
-the body (``remainders``) and the tie, both small: the master residual can therefore be taken
-from the body's own equation without subtracting two h̄-sized numbers
-(:mod:`subdomain_contact.body`).
+excluded, the master's tie included), tested with the master test function, which on body α
+is the test function at the slave DOFs. The two differ by the Joule heat the half-link
+deposits on the body (``remainders``) and the tie, both small beside a closed link: the master
+residual can therefore be taken from the body's own equation without subtracting two
+h̄-sized numbers (:mod:`subdomain_contact.body`).
 
 Numbers in materials, contacts and conditions become ``dolfinx.fem.Constant`` coefficients, so
 that a sweep over them compiles each form once.
@@ -160,10 +161,11 @@ class Contact:
         joule_to_first: Share of the contact's Joule heat g Δφ² deposited on the interface's
             first body (``Interface.bodies[0]``), the rest on the second; default one half.
         open_stiffness: Stiffness, relative to the normal law's (capped at 1e6 E / h, h the
-            body's cell size at the contact), that ties the master layer of an open contact
-            to its slaves: in the master equation, and in the bodies' Newton matrix as a
-            regularisation, never in their residual (an open contact transmits no force).
-            At most 1e-9, so that the Newton matrix stays exact to 1e-3 where it holds.
+            body's cell size at the contact), that ties the slaves of an open contact to its
+            master in the bodies' Newton matrix, as a regularisation, never in their
+            residual (an open contact transmits no force). At most 1e-9, so that the Newton
+            matrix stays exact to 1e-3 where it holds. The master equation's tie is
+            :data:`MASTER_TIE` times this one.
     """
 
     conductance: float | Law | None = None
@@ -545,11 +547,15 @@ class BodyForms:
         remainders: Interface name -> the Joule heat deposited on the body's side (a term
             of ``links``, not of ``fluxes``), or None where the scene has no temperature and
             potential together.
-        ties: Interface name -> the open side's tie, ``κ min(closure, 0) n·v`` with κ its
-            stiffness (see :class:`Contact`): a term of ``fluxes`` (it keeps the master of an
-            open contact defined) and of the body's Jacobian (it keeps a body that an
-            opening contact frees from being singular in a Newton step), never of the
-            body's residual; or None without displacement.
+        ties: Interface name -> the open side's tie in the body's Jacobian, ``κ
+            min(closure, 0) n·v`` with κ its stiffness (see :class:`Contact`): it keeps a
+            body that an opening contact frees from being singular in a Newton step; never
+            in the body's residual; or None without displacement. ``fluxes`` hold the
+            master's own tie instead (:data:`MASTER_TIE`), which keeps the master of an open
+            contact defined, at the mean of its slaves.
+        master_only: Interface name -> the terms by which minus ``fluxes`` differs from
+            minus the body's linearised link (``links`` and ``ties``): the Joule heat
+            deposited on the body's side and the body's tie less the master's; or None.
         bcs: Dirichlet conditions.
         ds: Boundary measure of the body, with its facet tags.
         tags: Interface name -> facet tag on the body.
@@ -581,6 +587,7 @@ class BodyForms:
     fluxes: dict[str, ufl.Form]
     remainders: dict[str, ufl.Form | None]
     ties: dict[str, ufl.Form | None]
+    master_only: dict[str, ufl.Form | None]
     bcs: list[dolfinx.fem.DirichletBC]
     ds: ufl.Measure
     tags: dict[str, int]
@@ -760,7 +767,7 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         for i in lowered.integrals_by_type("cell")
     )
     bulk, sources, storage = (_with_degree(f, degree) for f in (bulk, sources, storage))
-    links, fluxes, remainders, ties = {}, {}, {}, {}
+    links, fluxes, remainders, ties, master_only = {}, {}, {}, {}, {}
     n = ufl.FacetNormal(mesh)
     material = problem.materials[body.name]
     at_reference = constant(material.reference_temperature or 0.0)
@@ -771,12 +778,12 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         jump = {f: u[f] - um for f, um in split_fields(Um, fields).items()}
         contact = problem.contacts[i.name]
         share = contact.joule_to_first if i.bodies[0] == body.name else 1 - contact.joule_to_first
-        link, joule, tie, contact_laws = _half_link(
+        link, joule, tie, master_tie, contact_laws = _half_link(
             contact, jump, split_fields(Um, fields), v, n, constant, stiffness, share
         )
-        # one quadrature for every term of the half-link (its link, flux, Joule heat and tie),
+        # one quadrature for every term of the half-link (its link, flux, Joule heat and ties),
         # that of the whole: the master equation then sums exactly what the bodies feel
-        whole = link if tie is None else link + tie
+        whole = link if tie is None else link + tie + master_tie
         dS = ds(i.tag, degree=ufl.algorithms.estimate_total_polynomial_degree(whole))
         for name, law in contact_laws.items():
             laws[f"{name} of interface '{i.name}'"] = (law, dS)
@@ -784,11 +791,15 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         remainders[i.name] = None if joule is None else joule * dS
         ties[i.name] = None if tie is None else tie * dS
         flux = link if joule is None else link - joule
-        fluxes[i.name] = (flux if tie is None else flux + tie) * dS
+        fluxes[i.name] = (flux if tie is None else flux + master_tie) * dS
+        # minus the fluxes: minus the body's linearised link (``links`` and ``ties``) + these
+        extra = [t for t in (joule, tie, None if tie is None else -master_tie) if t is not None]
+        master_only[i.name] = sum(extra[1:], extra[0]) * dS if extra else None
     bcs, held, moving = _dirichlet(problem, body, W, fields, data, time)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
-        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, bcs,
+        body.name, W, fields, U, masters, bulk, links, fluxes, remainders, ties, master_only,
+        bcs,
         ds, tags, sources, loads, held, laws, history, rates, storage, timed,
         clock[0] if clock else None, moving,
     )  # fmt: skip
@@ -876,6 +887,22 @@ def _storage(
     return constant(m.density) * capacity * change * v["temperature"] * ufl.dx
 
 
+#: The stiffness of an open contact's tie in the master equation, relative to the tie the
+#: body's Newton matrix holds (``open_stiffness`` of the normal law's, 1e-9 by default: the
+#: master's is then 1e-6 of it). Both sides' ties scaled alike, the master of an open node
+#: balances where it did (the mean of its two slaves where the sides' ties are equal), so
+#: the root moves only where a node's facets are partly closed, by the ties' share beside
+#: the pressures there. What it sets is how well Newton's residual knows an open master
+#: (an error of r / κ): with the bodies' tie a master 10 % of its gap off left a residual 60
+#: times below Newton's tolerance (the cathode slot of the tests), and the collector bar
+#: slot's open masters moved 5 µm at a late step at 1.2M DOFs. Not stiffer: where a body is
+#: held by its ties alone (floating, a cold start), its interface response ``D − C A⁻¹ B``
+#: subtracts two numbers of the master's tie's size to leave one of the body's, and loses
+#: the digits of their ratio (the row of four 3D blocks' exact interface Krylov fell short
+#: of the forcing by 8 at 1e5).
+MASTER_TIE = 1e3
+
+
 def _half_link(
     c: Contact,
     jump: dict,
@@ -885,22 +912,24 @@ def _half_link(
     constant: Callable[[float], Expr],
     bulk_stiffness: Expr,
     share: float = 0.5,
-) -> tuple[Expr, Expr | None, Expr | None, dict[str, Expr]]:
+) -> tuple[Expr, Expr | None, Expr | None, Expr | None, dict[str, Expr]]:
     """The half-link's terms tested with ``v``.
 
     ``share`` of the contact's Joule heat is deposited on this side: the half-link's own,
     2 g (φ_s − φ_m)² (half of g Δφ² when φ_m sits midway), times 2 ``share``. Returns the
     terms the body feels (the fluxes minus the contact's Joule heat deposited on its side),
-    that Joule heat term (or None), the open side's tie (or None), and the contact's
-    conductances h(p, T_m), g(p, T_m) by name (UFL). The tie's stiffness is
-    ``open_stiffness`` times the normal law's, capped at 1e6 ``bulk_stiffness`` (the body's
-    E / h at the facet) [Pa/m].
+    that Joule heat term (or None), the open side's tie in the body's Newton matrix and in
+    the master equation (or None each), and the contact's conductances h(p, T_m), g(p, T_m)
+    by name (UFL). The body's tie's stiffness is ``open_stiffness`` times the normal law's,
+    capped at 1e6 ``bulk_stiffness`` (the body's E / h at the facet) [Pa/m]; the master's
+    :data:`MASTER_TIE` times the body's.
     """
     T_m = um.get("temperature", constant(c.temperature))
     pressure: Expr = constant(c.pressure)
     body: Expr = ufl.as_ufl(0.0)
     joule: Expr | None = None
     tie: Expr | None = None
+    master_tie: Expr | None = None
     if "displacement" in jump:
         j = jump["displacement"]
         closure = 2.0 * ufl.dot(j, n) - constant(c.gap)  # of the whole contact, per side
@@ -913,6 +942,7 @@ def _half_link(
             1e6 * bulk_stiffness, constant(c.normal.stiffness)
         )
         tie = kappa * stretch * ufl.dot(n, v["displacement"])
+        master_tie = constant(MASTER_TIE) * tie
         if c.tangential == "stuck":
             slip = j - ufl.dot(j, n) * n
             spring = c.normal.stiffness if c.slip_stiffness is None else c.slip_stiffness
@@ -928,7 +958,7 @@ def _half_link(
         if "temperature" in jump:
             joule = -constant(2 * share) * current * jump["potential"] * v["temperature"]
             body += joule
-    return body, joule, tie, laws
+    return body, joule, tie, master_tie, laws
 
 
 def _neumann(

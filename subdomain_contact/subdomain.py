@@ -119,9 +119,10 @@ BODY_RTOL_FACTOR = 1e-2
 RELAXATION, RELAXED_LOOSEST = 5e-3, 1e-4
 
 #: The largest weight of a master's residual (:meth:`Subdomains._error_weights`): an open
-#: contact's tie, 1e-9 of the contact's stiffness, weighs up to about 1e10 more than its
-#: neighbours (measured on the collector bar slot); a still weaker link is not to push its
-#: master's target below round-off.
+#: contact's master, held by the master equation's tie (1e-6 of the contact's stiffness,
+#: ``physics.MASTER_TIE``), weighs up to about 1e8 more than its neighbours (the row of four
+#: 3D blocks at 300 K: 1.4e8, and 1e11 with the ties of 1e-9 before; the collector bar slot
+#: 1e10 then); a still weaker link is not to push its master's target below round-off.
 MAX_ERROR_WEIGHT = 1e12
 
 #: Singular values of a body's rows of the coarse basis (orthonormal columns, so σ ≤ 1)
@@ -288,11 +289,12 @@ class Subdomains:
         """Per master DOF of a displacement: ``Σ_α K_α / Σ_α S_α`` (≥ 1), else 1.
 
         ``S_α = (1/l_α + 1/K_α)⁻¹`` is the series law of the half-link ``l_α`` and the body
-        ``K_α`` (row sums, :meth:`Body.master_stiffness`): the order of the interface
-        operator's diagonal, which is ``Σ K_α`` where the links are stiff. A master held by
-        weak links only (an open contact's, tied by ``open_stiffness`` = 1e-9 of the
+        ``K_α`` (row sums, :meth:`Body.master_stiffness`, ``l_α`` from the master's own
+        block): the order of the interface operator's diagonal, which is ``Σ K_α`` where the
+        links are stiff. A master held by weak links only (an open contact's, tied in the
+        master equation by ``physics.MASTER_TIE`` × ``open_stiffness`` = 1e-6 of the
         contact's stiffness) answers a residual ``r`` with an error ``r / Σ S_α``, up to
-        1e9 times that of a master between stiff links; and each half-link reads its
+        about 1e8 times that of a master between stiff links; and each half-link reads its
         closure, hence the contact's status, against that master. Its residual is
         therefore weighed by this factor, in the Krylov solve and in its stopping test, so
         that its error, not its residual, meets the tolerance (the collector bar slot with
@@ -302,7 +304,7 @@ class Subdomains:
         meets the forcing of 1e-8 (``newton.FORCING``), which holds the path, and a floating
         body held by ties alone at a cold start (the row of four 3D blocks of the tests)
         makes the weighed target unreachable in round-off. Nor for a symmetric problem: CG
-        takes one weight for every DOF, which this would make 1e9 times too tight for the
+        takes one weight for every DOF, which this would make 1e8 times too tight for the
         others, nor without a displacement.
         """
         system = self.system

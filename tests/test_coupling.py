@@ -10,7 +10,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
-from subdomain_contact import merged, newton
+from subdomain_contact import merged, newton, readback
 from subdomain_contact import schur as schur_module
 from subdomain_contact.merged import MergePlan, merged_matrix, same_pattern
 from subdomain_contact.physics import FIELDS
@@ -122,6 +122,59 @@ def test_the_newton_matrix_is_the_derivative_of_the_residual(comm, depth):
             assert error[field] <= 1e-7 * norm[field], (probe, field, error[field] / norm[field])
     system.set_state(x)
     destroy(x, *vecs)
+
+
+def test_newtons_residual_sees_an_open_contacts_master(comm):
+    """The cathode slot (2D) with a gap of 0.3 mm on every contact: at the solution three of
+    the bar side's seven nodes are open. Each master, open or closed, sits at the mean of its
+    two slaves' normal displacements (both sides' ties are alike here, as their pressures
+    are), so each half-link reads the contact's own closure. And Newton's residual sees an
+    open master: the widest open, moved by a tenth of its gap, leaves a displacement
+    residual above Newton's tolerance (the master equation's tie, ``physics.MASTER_TIE``;
+    with the bodies' tie there, 1e-9 of the contact's stiffness, it stayed far below it)."""
+    problem = cathode_slot(cathode_slot_scene(0.06, 0.03, comm=comm))
+    gap = 3e-4  # m
+    contacts = {k: dataclasses.replace(c, gap=gap) for k, c in problem.contacts.items()}
+    system = make_system(dataclasses.replace(problem, contacts=contacts))
+    system.reset({"temperature": 300.0})
+    rtol = 1e-10
+    result = sc.solve(system, rtol=rtol)
+    sides = readback._sides(system)
+    opened = {}
+    for k, layer in system.layers.items():
+        first, second = (sides[name][k] for name in layer.interface.bodies)
+        parts = [
+            slice(c * layer.nodes, (c + 1) * layer.nodes)
+            for c, (f, _) in enumerate(layer.channels)
+            if f == "displacement"
+        ]
+
+        def nodal(values, parts=parts):
+            return np.stack([values[p] for p in parts], axis=1)
+
+        unit = nodal(first["normal"])
+        unit /= np.linalg.norm(unit, axis=1)[:, None]
+        u_a, u_b = nodal(first["values"]), nodal(second["values"])
+        off = np.sum((nodal(system.masters[k]) - 0.5 * (u_a + u_b)) * unit, axis=1)
+        # the ties' equation is linear in u: Newton's last step puts the master at the mean
+        # to the round-off of u (ε max|u| = 2e-19 m; measured 3e-18 m against max|u| 8.5e-4)
+        assert np.abs(off).max() <= 1e-12 * np.abs(u_a).max(), k
+        gaps = gap - np.sum((u_a - u_b) * unit, axis=1)
+        opened[k] = [(gaps[i], [p.start + i for p in parts], unit[i])
+                     for i in np.flatnonzero(gaps > 0)]  # fmt: skip
+    assert [k for k, nodes in opened.items() if nodes] == ["bar_side"]  # measured: 3 of 7 nodes
+    x, f = system.state(), system.create_vector()
+    tolerance = rtol * result.scale["displacement"]  # Newton's stopping test on u [N]
+    node_gap, at, normal = max(opened["bar_side"], key=lambda node: node[0])  # 65 µm
+    masters = {k: v.copy() for k, v in system.masters.items()}
+    masters["bar_side"][at] += 0.1 * node_gap * normal
+    system.set_masters(masters)
+    system.residual(f)
+    # Newton does not stop there: measured 16 times its tolerance, and 1/61 of it with the
+    # bodies' tie in the master equation (MASTER_TIE = 1), the tie's ratio of 1e3
+    assert system.field_norms(f)["displacement"] > tolerance
+    system.set_state(x)
+    destroy(x, f)
 
 
 def test_a_full_step_that_runs_away_is_halved_and_newton_converges(comm, monkeypatch):
