@@ -308,9 +308,15 @@ def test_demo_collector_bar_slot(shared_tmp, monkeypatch, comm, capsys):
         lines = capsys.readouterr().out.splitlines()
         starts = [i for i, line in enumerate(lines) if line.startswith("Newton (limited)   0:")]
         assert starts
-        for i in starts:  # the slot's climb: the safeguard's verdict on a halved step
+        # the slot's climb: the line before it says why the full steps gave up. Mostly the
+        # runaway safeguard's verdict on a halved step; the constant setup's full steps on
+        # 2 ranks wander first along a path that the round-off sets (one code, four runs:
+        # 4 or 12–18 steps, or converged), and ended once by GMRES breaking down on the
+        # runaway iterates of the field split (PETSc reason -5): a reason either way
+        reasons = ("lands at", "monolithic linear solve failed")
+        for i in starts:
             assert lines[i - 1].startswith("Newton (basic): Newton failed after"), lines[i - 1]
-            assert "lands at" in lines[i - 1], lines[i - 1]
+            assert any(reason in lines[i - 1] for reason in reasons), lines[i - 1]
     for setup in ("constant", "pressure"):
         solved = [f"{setup}, bar 160 mm, subdomain"]
         if study:  # the design variant: a 174 mm bar, by the subdomain route
