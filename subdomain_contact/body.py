@@ -420,10 +420,7 @@ class Body:
         ties the normal alone where a stuck one's slip spring holds the tangents. The bulk's
         is the largest row sum on the slave's field (:meth:`_bulk_norms_by_field`).
         """
-        position, layer = self.position[k], self.layers[k]
-        D = -self.blocks[k]["BP"][position, :]
-        if "DtP" in self.blocks[k]:
-            D = D + self.blocks[k]["DtP"]
+        layer, D = self.layers[k], self._master_block(k)
         link = np.abs(D).sum(axis=1).A1
         nodes = layer.nodes
         u = [c for c, (f, _) in enumerate(layer.channels) if f == "displacement"]
@@ -439,7 +436,7 @@ class Body:
             smallest = np.linalg.eigvalsh(0.5 * (lumped + lumped.transpose(0, 2, 1)))[:, 0]
             for c in u:
                 link[c * nodes : (c + 1) * nodes] = np.maximum(smallest, 0.0)
-        return link, self._bulk_norms[self._kept_field[position]]
+        return link, self._bulk_norms[self._kept_field[self.position[k]]]
 
     def _link_rows(self, k: str) -> Vector:
         """Row sums of ``|L_k|`` on the contact DOFs: the half-link's stiffness [W/K, S, N/m]."""
@@ -1008,11 +1005,13 @@ class Body:
         return stiffness
 
     def link_stiffness(self, k: str) -> Matrix:
-        """The half-link's own master block ``P_kᵀ D_k P_k`` (the paper's K_mm = h̄M)."""
-        D = -self.blocks[k]["BP"][self.position[k], :].toarray()
-        if "DtP" in self.blocks[k]:
-            D = D + self.blocks[k]["DtP"].toarray()
-        return D
+        """The half-link's own master block ``P_kᵀ D_k P_k`` (the paper's K_mm = h̄M), dense."""
+        return self._master_block(k).toarray()
+
+    def _master_block(self, k: str) -> scipy.sparse.csr_matrix:
+        """``P_kᵀ D_k P_k`` (masters of k², sparse): ``−B_k P_k`` on the slave rows, plus D̃."""
+        D = -self.blocks[k]["BP"][self.position[k], :]
+        return D + self.blocks[k]["DtP"] if "DtP" in self.blocks[k] else D
 
     # -- residuals ------------------------------------------------------------------------
     def residual(self, *, conditions: bool = True) -> Vector:

@@ -778,12 +778,12 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         jump = {f: u[f] - um for f, um in split_fields(Um, fields).items()}
         contact = problem.contacts[i.name]
         share = contact.joule_to_first if i.bodies[0] == body.name else 1 - contact.joule_to_first
-        link, joule, tie, master_tie, contact_laws = _half_link(
+        link, joule, tie, contact_laws = _half_link(
             contact, jump, split_fields(Um, fields), v, n, constant, stiffness, share
         )
         # one quadrature for every term of the half-link (its link, flux, Joule heat and ties),
         # that of the whole: the master equation then sums exactly what the bodies feel
-        whole = link if tie is None else link + tie + master_tie
+        whole = link if tie is None else link + tie
         dS = ds(i.tag, degree=ufl.algorithms.estimate_total_polynomial_degree(whole))
         for name, law in contact_laws.items():
             laws[f"{name} of interface '{i.name}'"] = (law, dS)
@@ -791,10 +791,14 @@ def body_forms(problem: Problem, body: Body) -> BodyForms:
         remainders[i.name] = None if joule is None else joule * dS
         ties[i.name] = None if tie is None else tie * dS
         flux = link if joule is None else link - joule
-        fluxes[i.name] = (flux if tie is None else flux + master_tie) * dS
-        # minus the fluxes: minus the body's linearised link (``links`` and ``ties``) + these
-        extra = [t for t in (joule, tie, None if tie is None else -master_tie) if t is not None]
-        master_only[i.name] = sum(extra[1:], extra[0]) * dS if extra else None
+        fluxes[i.name] = (flux if tie is None else flux + MASTER_TIE * tie) * dS
+        # minus the fluxes is minus the body's linearised link (``links`` and ``ties``) plus
+        # the Joule heat and the body's tie less the master's
+        extra = joule
+        if tie is not None:
+            excess = (1.0 - MASTER_TIE) * tie
+            extra = excess if extra is None else extra + excess
+        master_only[i.name] = None if extra is None else extra * dS
     bcs, held, moving = _dirichlet(problem, body, W, fields, data, time)
     tags = {i.name: i.tag for i in interfaces}
     return BodyForms(
@@ -912,24 +916,23 @@ def _half_link(
     constant: Callable[[float], Expr],
     bulk_stiffness: Expr,
     share: float = 0.5,
-) -> tuple[Expr, Expr | None, Expr | None, Expr | None, dict[str, Expr]]:
+) -> tuple[Expr, Expr | None, Expr | None, dict[str, Expr]]:
     """The half-link's terms tested with ``v``.
 
     ``share`` of the contact's Joule heat is deposited on this side: the half-link's own,
     2 g (φ_s − φ_m)² (half of g Δφ² when φ_m sits midway), times 2 ``share``. Returns the
     terms the body feels (the fluxes minus the contact's Joule heat deposited on its side),
-    that Joule heat term (or None), the open side's tie in the body's Newton matrix and in
-    the master equation (or None each), and the contact's conductances h(p, T_m), g(p, T_m)
-    by name (UFL). The body's tie's stiffness is ``open_stiffness`` times the normal law's,
-    capped at 1e6 ``bulk_stiffness`` (the body's E / h at the facet) [Pa/m]; the master's
-    :data:`MASTER_TIE` times the body's.
+    that Joule heat term (or None), the open side's tie in the body's Newton matrix (or
+    None; the master equation's is :data:`MASTER_TIE` times it), and the contact's
+    conductances h(p, T_m), g(p, T_m) by name (UFL). The tie's stiffness is
+    ``open_stiffness`` times the normal law's, capped at 1e6 ``bulk_stiffness`` (the body's
+    E / h at the facet) [Pa/m].
     """
     T_m = um.get("temperature", constant(c.temperature))
     pressure: Expr = constant(c.pressure)
     body: Expr = ufl.as_ufl(0.0)
     joule: Expr | None = None
     tie: Expr | None = None
-    master_tie: Expr | None = None
     if "displacement" in jump:
         j = jump["displacement"]
         closure = 2.0 * ufl.dot(j, n) - constant(c.gap)  # of the whole contact, per side
@@ -942,7 +945,6 @@ def _half_link(
             1e6 * bulk_stiffness, constant(c.normal.stiffness)
         )
         tie = kappa * stretch * ufl.dot(n, v["displacement"])
-        master_tie = constant(MASTER_TIE) * tie
         if c.tangential == "stuck":
             slip = j - ufl.dot(j, n) * n
             spring = c.normal.stiffness if c.slip_stiffness is None else c.slip_stiffness
@@ -958,7 +960,7 @@ def _half_link(
         if "temperature" in jump:
             joule = -constant(2 * share) * current * jump["potential"] * v["temperature"]
             body += joule
-    return body, joule, tie, master_tie, laws
+    return body, joule, tie, laws
 
 
 def _neumann(
