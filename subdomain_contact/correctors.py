@@ -29,7 +29,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.body import Body
-from subdomain_contact.merged import Layout, merged_matrix, same_pattern
+from subdomain_contact.merged import Layout, MergePlan, RestrictedPlan, plan
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
     SWEEP_DIRECT,
@@ -269,6 +269,8 @@ class StripSolve:
         #: The layers of its first build where :meth:`narrow` made it narrower
         self.narrowed_from: int | None = None
         self.K: PETSc.Mat | None = None
+        #: Where the merged matrix's entries go in ``K`` (:func:`~subdomain_contact.merged.plan`)
+        self.plan: MergePlan | RestrictedPlan | None = None
         self.ksp: PETSc.KSP | None = None
         #: This rank's rows of the merged matrix in the strip (sorted global indices)
         self.rows: npt.NDArray[np.int64] | None = None
@@ -310,13 +312,14 @@ class StripSolve:
                 "(SparseStrip(split=True): about half the factors with T, φ and u), fewer "
                 "ranks per node, or a narrower strip (SparseStrip(layers=..., share=...))",
             )
-        K = merged_matrix(system, self.rows, self.reach)
-        if self.K is not None and same_pattern(K, self.K):
-            K.copy(self.K, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # MUMPS keeps its analysis
-            K.destroy()
+        data = None if self.plan is None else self.plan.values(system)
+        if data is not None:  # the same entries: MUMPS keeps its analysis
+            self.plan.write(self.K, data)
         else:  # the first, or contacts changed the pattern
             destroy(self.K, self.ksp, *(iset for _, iset in self.sets))
-            self.K, self.ksp, self.sets = K, None, []
+            self.plan = plan(system, self.rows, self.reach)
+            self.K = self.plan.matrix(self.comm, self.plan.values(system))
+            self.ksp, self.sets = None, []
         fields = system.problem.fields
         if self.split and "displacement" in fields and len(fields) > 1:
             self._sweep(system)
@@ -391,7 +394,7 @@ class StripSolve:
     def destroy(self) -> None:
         """Free the matrix and its factorisation (collective)."""
         destroy(self.K, self.ksp, *(iset for _, iset in self.sets))
-        self.K = self.ksp = self.rows = None
+        self.K = self.ksp = self.rows = self.plan = None
         self.sets = []
 
 

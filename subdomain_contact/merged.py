@@ -25,8 +25,9 @@ __all__ = [
     "VALUES_SLACK",
     "Layout",
     "MergePlan",
+    "RestrictedPlan",
     "merged_matrix",
-    "same_pattern",
+    "plan",
     "unassembled_matrix",
 ]
 
@@ -454,6 +455,103 @@ def _spliced(
     return out
 
 
+class RestrictedPlan:
+    """The merged matrix restricted to some rows and their columns (the sparse strip's).
+
+    Its pattern is made once, with where each entry of a state goes in it. The entries of a
+    state (:func:`_body_entries` with the kept rows' places, in a fixed order) are summed
+    into the pattern by their places (``np.bincount``): no sort, where the COO-to-CSR
+    conversion at every Newton step had cost rank 0 1.5 s a Jacobian (cProfile) on the
+    collector bar slot at 203,925 DOFs. :meth:`values` is None where the entries stored
+    differ (a digest of every rank's rows and columns), as :class:`MergePlan`'s. ``reach``:
+    as :func:`merged_matrix`'s. Collective.
+
+    The sparse strip keeps its plan, and the whole one (:class:`MergePlan`) where its
+    layers cover every row, which it had made again at every Jacobian. The nested slot,
+    constant setup, the subdomain Newton with the strip split, 2 ranks (two runs each,
+    alternated, 2026-12-04): its two coarser levels (11,530 and 45,695 DOFs, the strip
+    covering them) 26.6–26.9 s against 30.6–30.8 s; its fine level 113.4–123.8 s against
+    120.6–122.6 s, within the runs' spread (the other rank's work sets its pace).
+    """
+
+    def __init__(
+        self, system: System, rows: npt.NDArray, reach: Mapping[str, float] | None = None
+    ) -> None:
+        comm, layout = system.comm, Layout(system)
+        keep = np.concatenate(comm.allgather(np.asarray(rows, np.int64)))
+        self.size, self.reach = keep.size, reach
+        self._place = np.full(layout.size, -1, dtype=np.int64)  # each row's place, or -1
+        self._place[keep] = np.arange(keep.size)
+        self._first = comm.exscan(len(rows)) or 0
+        self._local = len(rows)
+        r, c, _, digest = self._entries(system)
+        self.pattern = tuple(comm.allgather(digest))
+        key = (r - self._first) * keep.size + c
+        del r, c
+        unique, where = np.unique(key, return_inverse=True)  # row by row, columns sorted
+        del key
+        self._where = where.astype(_positions(unique.size))
+        del where
+        counts = np.bincount(unique // keep.size, minlength=self._local)
+        self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
+        self.indices = (unique % keep.size).astype(PETSc.IntType)
+
+    def _entries(self, system: System) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, bytes]:
+        """This rank's entries (rows numbered among the kept, columns too) and their digest."""
+        comm, layout = system.comm, Layout(system)
+        entries, masters = [], []
+        for name in system.bodies:
+            cut = None if self.reach is None else self.reach.get(name)
+            body_rows, body_masters = _body_entries(system, layout, name, self._place, cut)
+            entries += body_rows
+            masters += body_masters
+        gathered = comm.gather(masters, root=0)
+        if comm.rank == 0:
+            entries += [part for parts in gathered for part in parts]
+        r, c, v = _concatenate(entries)
+        digest = hashlib.sha256(np.array([self.size, r.size], dtype=np.int64))
+        digest.update(np.ascontiguousarray(r))
+        digest.update(np.ascontiguousarray(c))
+        return r, c, v, digest.digest()
+
+    @property
+    def nnz(self) -> int:
+        """This rank's stored entries."""
+        return int(self.indices.size)
+
+    def values(self, system: System) -> npt.NDArray | None:
+        """The restricted matrix's values on this rank at the system's state, in its pattern.
+
+        None (on every rank) where the entries stored differ. Collective.
+        """
+        _, _, v, digest = self._entries(system)
+        if tuple(system.comm.allgather(digest)) != self.pattern:
+            return None
+        return np.bincount(self._where, v, minlength=self.nnz)
+
+    def matrix(self, comm: MPI.Comm, data: npt.NDArray) -> PETSc.Mat:
+        """A new AIJ matrix of the plan's pattern holding ``data`` (collective)."""
+        n = (self._local, PETSc.DETERMINE)
+        return PETSc.Mat().createAIJ(size=(n, n), csr=(self.indptr, self.indices, data), comm=comm)
+
+    write = MergePlan.write
+
+
+def plan(
+    system: System, rows: npt.NDArray | None = None, reach: Mapping[str, float] | None = None
+) -> MergePlan | RestrictedPlan:
+    """The plan of the merged matrix, or of it restricted to ``rows``. Collective.
+
+    :class:`RestrictedPlan` on ``rows``; :class:`MergePlan` without them, or where every
+    rank keeps every row.
+    """
+    if rows is not None:
+        kept = system.comm.allreduce(len(rows))
+        if kept < system.comm.allreduce(system.local_size):
+            return RestrictedPlan(system, rows, reach)
+    return MergePlan(system)
+
+
 def merged_matrix(
     system: System, rows: npt.NDArray | None = None, reach: Mapping[str, float] | None = None
 ) -> PETSc.Mat:
@@ -470,47 +568,11 @@ def merged_matrix(
     collector bar slot at 1.07M DOFs: the whole merged matrix had doubled a rank's resident
     set, 6.1 to 11.4 GiB, for a strip of 228k of its rows). ``reach``: body name -> the
     length [m] of a Robin condition on that body's cut (:func:`_lumped`); a body not named
-    is clamped beyond its kept rows.
+    is clamped beyond its kept rows. Made by its :func:`plan`, which a caller that makes it
+    again at other states keeps.
     """
-    comm, layout = system.comm, Layout(system)
-    keep, place = None, None
-    if rows is not None:
-        keep = np.concatenate(comm.allgather(np.asarray(rows, np.int64)))
-        if keep.size == layout.size:  # every row (bodies thin or small): the whole, as numbered
-            keep = rows = None
-        else:  # each entry's place by a lookup, not by searching the kept rows
-            place = np.full(layout.size, -1, dtype=np.int64)
-            place[keep] = np.arange(keep.size)
-    if place is None:
-        plan = MergePlan(system)
-        return plan.matrix(comm, plan.values(system))
-    entries, masters = [], []
-    for name in system.bodies:
-        cut = None if reach is None else reach.get(name)
-        body_rows, body_masters = _body_entries(system, layout, name, place, cut)
-        entries += body_rows
-        masters += body_masters
-    gathered = comm.gather(masters, root=0)
-    if comm.rank == 0:
-        entries += [part for parts in gathered for part in parts]
-    r, c, v = _concatenate(entries)
-    first = comm.exscan(len(rows)) or 0
-    n = (len(rows), PETSc.DETERMINE)
-    return _aij(r - first, c, v, (len(rows), keep.size), (n, n), comm)
-
-
-def same_pattern(A: PETSc.Mat, B: PETSc.Mat) -> bool:
-    """Whether two AIJ matrices store the same entries (collective).
-
-    The count of stored entries is not enough: a contact that opens here and closes there
-    may drop as many entries as it adds, and a factorisation reused on such a pattern solves
-    another matrix.
-    """
-    if A.getSize() != B.getSize() or A.getOwnershipRange() != B.getOwnershipRange():
-        return False
-    a, b = A.getValuesCSR(), B.getValuesCSR()
-    same = bool(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]))
-    return bool(A.getComm().tompi4py().allreduce(same, op=MPI.LAND))
+    made = plan(system, rows, reach)
+    return made.matrix(system.comm, made.values(system))
 
 
 def unassembled_matrix(system: System) -> PETSc.Mat:

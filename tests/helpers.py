@@ -2,6 +2,8 @@
 
 import numpy as np
 import scipy.linalg
+from mpi4py import MPI
+from petsc4py import PETSc
 
 import subdomain_contact as sc
 
@@ -94,3 +96,17 @@ def preconditioned_condition(problem, *, coarse: bool) -> float:
         P = np.column_stack([solver.precondition(e) for e in np.eye(solver.size)])
     eigenvalues = scipy.linalg.eigvalsh(0.5 * (S + S.T), np.linalg.inv(0.5 * (P + P.T)))
     return float(eigenvalues.max() / eigenvalues.min())
+
+
+def same_pattern(A: PETSc.Mat, B: PETSc.Mat) -> bool:
+    """Whether two AIJ matrices store the same entries (collective).
+
+    The count of stored entries is not enough: a contact that opens here and closes there
+    may drop as many entries as it adds, and a factorisation reused on such a pattern solves
+    another matrix.
+    """
+    if A.getSize() != B.getSize() or A.getOwnershipRange() != B.getOwnershipRange():
+        return False
+    a, b = A.getValuesCSR(), B.getValuesCSR()
+    same = bool(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]))
+    return bool(A.getComm().tompi4py().allreduce(same, op=MPI.LAND))

@@ -5,14 +5,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-from helpers import make_system, preconditioned_condition
+from helpers import make_system, preconditioned_condition, same_pattern
 from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
 from subdomain_contact import merged, newton, readback
 from subdomain_contact import schur as schur_module
-from subdomain_contact.merged import MergePlan, merged_matrix, same_pattern
+from subdomain_contact.merged import MergePlan, merged_matrix
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import destroy
 from verification.cases import (
@@ -497,19 +497,31 @@ def test_entries_spliced_by_chunks_are_numpys_insert(monkeypatch):
     assert np.array_equal(got[1], np.insert(b, at, values[1]))
 
 
-def test_the_merged_matrix_restricted_to_rows_is_its_submatrix(comm):
+def test_the_merged_matrix_restricted_to_rows_is_its_submatrix(comm, monkeypatch):
     """Built on some rows alone (the sparse strip's), the merged matrix is the whole one's
     submatrix on those rows and columns: the same stored entries, their values to the
-    round-off of summing an entry's parts in another order (scipy sorts duplicates by an
-    unstable sort). Every third row of each rank (masters included on rank 0), warm state.
+    round-off of summing an entry's parts in another order (scipy's sort of duplicates
+    against the plan's sum in the entries' order). Every third row of each rank (masters
+    included on rank 0), warm state. Its plan (:class:`RestrictedPlan`), made at the cold
+    state, takes the warm values: the matrix of a plan made at the warm state, to the bit;
+    a block with another pattern is refused.
     """
     system = make_system(squeezed_joule_bars(bars_scene(8, 2, comm=comm)))
     system.reset({"temperature": 300.0})
+    system.assemble_jacobian()
+    local = system.local_size  # this rank's rows of the merged matrix, from first
+    first = comm.exscan(local) or 0
+    rows = np.arange(first, first + local, 3, dtype=np.int64)
+    cold = merged.plan(system, rows)
+    assert isinstance(cold, merged.RestrictedPlan)
+    K = cold.matrix(comm, cold.values(system))
     sc.solve(system, sc.Monolithic(), rtol=1e-10)
     system.assemble_jacobian()
+    warm = cold.values(system)
+    assert warm is not None
+    cold.write(K, warm)
     whole = merged_matrix(system)
-    first, last = whole.getOwnershipRange()
-    rows = np.arange(first, last, 3, dtype=np.int64)
+    assert whole.getOwnershipRange() == (first, first + local)
     index = PETSc.IS().createGeneral(rows.astype(PETSc.IntType), comm=comm)
     expected = whole.createSubMatrix(index, index)
     restricted = merged_matrix(system, rows)
@@ -524,7 +536,19 @@ def test_the_merged_matrix_restricted_to_rows_is_its_submatrix(comm):
     scale = np.maximum.reduceat(np.abs(b[2]), b[0][:-1]) if b[2].size else b[2]
     scale = np.repeat(np.where(np.diff(b[0]) > 0, scale, 0.0), np.diff(b[0]))
     assert np.all(np.abs(a[2] - b[2]) <= 4 * np.finfo(float).eps * scale)
-    destroy(whole, index, expected, restricted)
+    c = K.getValuesCSR()
+    assert all(np.array_equal(x, y) for x, y in zip(a, c, strict=True))
+    original = merged._restricted
+
+    def fewer(*args):  # one kept entry fewer on rank 0: every rank refuses
+        parts = original(*args)
+        if comm.rank == 0 and parts and parts[0][0].size:
+            parts[0] = tuple(x[:-1] for x in parts[0])
+        return parts
+
+    monkeypatch.setattr(merged, "_restricted", fewer)
+    assert cold.values(system) is None
+    destroy(whole, index, expected, restricted, K)
 
 
 def test_the_merged_matrix_of_a_symmetric_system_with_fixed_slaves_is_symmetric_definite(comm):
