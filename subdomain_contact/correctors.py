@@ -32,12 +32,14 @@ from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, MergePlan, RestrictedPlan, plan
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
+    REFACTORISATION_MARGIN,
     SWEEP_DIRECT,
     THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
     make_ksp,
     ordered,
+    refactorisation_memory,
     refactorisation_shortfall,
     refuse_refactorisation,
 )
@@ -243,6 +245,11 @@ class SparseStrip:
         return operator
 
 
+#: The whole strip's MUMPS factors over its sweep's two: 10.6 against 5.63 GB on the collector
+#: bar slot at 1.07M DOFs, 2 ranks (docs/iterative_bodies.md), 1.9, taken as 2.
+WHOLE_OVER_SWEEP = 2.0
+
+
 class StripSolve:
     """``G r``: the master part of the strips' merged matrix solved for ``r`` on the masters.
 
@@ -276,6 +283,11 @@ class StripSolve:
         self.rows: npt.NDArray[np.int64] | None = None
         #: Factorisations made
         self.factorisations = 0
+        #: Jacobians at which the sweep left the interface Krylov short and the strip was
+        #: factorised whole (:meth:`solve_whole`)
+        self.fallbacks = 0
+        self._whole_now = False  # this Jacobian's strip factorised whole after a sweep
+        self.fields: tuple[str, ...] = ()  # the system's, at the last update
         #: Bodies every DOF of which lies in the strip (on every rank): the strip holds their
         #: whole ``S^α``, kernel modes included.
         self.whole: frozenset[str] = frozenset()
@@ -283,7 +295,10 @@ class StripSolve:
     def update(self, system: System) -> None:
         """Restrict the merged matrix to the strips and factorise (its analysis kept)."""
         layers, share = self.layers, self.share
-        self.comm = system.comm
+        self.comm, self.fields = system.comm, system.problem.fields
+        if self._whole_now:  # the last Jacobian's strip, factorised whole: sweep again
+            destroy(self.ksp)
+            self.ksp, self._whole_now = None, False
         if self.rows is None:
             layout = Layout(system)
             picked, whole = [], {}
@@ -320,8 +335,7 @@ class StripSolve:
             self.plan = plan(system, self.rows, self.reach)
             self.K = self.plan.matrix(self.comm, self.plan.values(system))
             self.ksp, self.sets = None, []
-        fields = system.problem.fields
-        if self.split and "displacement" in fields and len(fields) > 1:
+        if self.swept:
             self._sweep(system)
         else:
             ksp, self.ksp = self.ksp, None  # a failed factorisation is destroyed by factorise
@@ -330,6 +344,39 @@ class StripSolve:
                 self.K, self.prefix, "sparse strip corrector", ksp, dim=dim, again=again
             )
         self.factorisations += 1
+
+    @property
+    def swept(self) -> bool:
+        """Whether the strip is solved by the sweep over its fields at this Jacobian."""
+        fields = self.fields
+        split = self.split and "displacement" in fields and len(fields) > 1
+        return split and not self._whole_now
+
+    def whole_fits(self) -> bool:
+        """Whether the whole strip's factorisation fits where the sweep's two are freed.
+
+        Its need is :data:`WHOLE_OVER_SWEEP` times the sweep's (MUMPS INFO(22), with the
+        refactorisation margin), against the memory left plus what the sweep frees.
+        Collective.
+        """
+        need, available = refactorisation_memory(self.ksp, self.comm)
+        freed = need / REFACTORISATION_MARGIN
+        return available is None or WHOLE_OVER_SWEEP * need <= available + freed
+
+    def solve_whole(self, system: System) -> None:
+        """Factorise this Jacobian's strip whole, in place of the sweep, until the next update.
+
+        The sweep is exact but for the contact laws' dependence on u; where the interface
+        Krylov stalls on it (the collector bar slot's cold start at 17k DOFs: 100 GMRES
+        iterations at 0.999 of the start), the whole strip is its exact operator. The next
+        :meth:`update` sweeps again.
+        """
+        destroy(self.ksp, *(iset for _, iset in self.sets))
+        self.ksp, self.sets, self._whole_now = None, [], True
+        dim, again = system.problem.scene.dim, not system.is_linear
+        self.ksp = factorise(self.K, self.prefix, "sparse strip corrector", dim=dim, again=again)
+        self.factorisations += 1
+        self.fallbacks += 1
 
     def _sweep(self, system: System) -> None:
         """Set up the strip's solve as one sweep over (T, φ), then u, each factorised.

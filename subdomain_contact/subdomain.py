@@ -685,6 +685,29 @@ class Subdomains:
         return self.max_rounds
 
     def _solve_krylov_lagged(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
+        """The interface Krylov solve; with a strip swept over its fields, whole if it fails.
+
+        A sweep that leaves the solve short (:meth:`StripSolve.solve_whole`) is replaced by
+        the whole strip's factorisation for this Jacobian, and the solve goes on from where
+        it stopped.
+        """
+        try:
+            return self._solve_krylov_kept(b, tolerance, result)
+        except SubdomainConvergenceError as error:
+            if self.strip is None or not self.strip.swept:
+                raise
+            if not self.strip.whole_fits():
+                raise SubdomainConvergenceError(
+                    f"{error}; the whole strip, which would replace its sweep over the fields, "
+                    "would not fit in the memory left: try a narrower strip "
+                    "(SparseStrip(layers=...)) or more nodes",
+                    error.result,
+                    error.iterate,
+                ) from error
+            self.strip.solve_whole(self.system)
+            return self._solve_krylov(b, tolerance, result, error.iterate)
+
+    def _solve_krylov_kept(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         """The interface Krylov solve; with a kept preconditioner, rebuilt if it fails or slows."""
         before, continued, reference = 0, False, None
         try:
