@@ -17,6 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
+from subdomain_contact import correctors
 from subdomain_contact.correctors import dofs_within_layers
 from subdomain_contact.merged import merged_matrix
 from subdomain_contact.scene import gather_rows, match_points
@@ -198,7 +199,9 @@ def test_sparse_strip_is_the_dense_strip_corrector_on_one_interface(comm, h):
             assert np.linalg.norm(a - b) <= 10 * EPS * loss * condition * np.linalg.norm(a)
 
 
-def test_a_sweep_that_leaves_the_interface_krylov_short_is_replaced_by_the_whole_strip(comm):
+def test_a_sweep_that_leaves_the_interface_krylov_short_is_replaced_by_the_whole_strip(
+    comm, monkeypatch
+):
     """A strip swept over its fields (``split``) is exact but for the contact laws' dependence
     on u; where the interface Krylov stops short on it, this Jacobian's strip is factorised
     whole and the solve goes on from its iterate; the next set-up sweeps again. The coupled
@@ -238,6 +241,19 @@ def test_a_sweep_that_leaves_the_interface_krylov_short_is_replaced_by_the_whole
     solver.setup(system)  # the next Jacobian: swept again
     assert strip.swept and solver.strip.ksp.getPC().getType() == "fieldsplit"
     solver.destroy()
+    # where the whole strip would not fit (the sweep's factors said to take 1 TB, 1 GB
+    # left: INFO(22) of these bars is below MUMPS's 1 MB unit), the stall is said, and why
+    # no fallback came, before any factorisation
+    monkeypatch.setattr(correctors, "refactorisation_memory", lambda ksp, comm: (1e12, 1e9))
+    options.setValue("sc_strip_pc_fieldsplit_type", "additive")
+    try:
+        solver = sc.Subdomains(sc.SparseStrip(split=True), krylov=True, max_rounds=1)
+        with pytest.raises(sc.SubdomainConvergenceError, match="would not fit"):
+            linear_solve(problem, solver=solver)
+        assert solver.strip.fallbacks == 0
+        solver.destroy()
+    finally:
+        options.delValue("sc_strip_pc_fieldsplit_type")
 
 
 @pytest.mark.parametrize("h", [1e3, 1e6])
