@@ -205,20 +205,21 @@ class SparseStrip:
     second factorisation would not fit beside; one layer 228,455 rows and 3.49 GB (at 174k
     DOFs one layer took the same Newton path as ten in 0.80 of the time).
 
-    With ``split``, a strip of T or φ and u is solved by one sweep over (T, φ), then u, each
-    factorised (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): exact but for the contacts'
-    laws of the pressure, two factorisations of 2 and 3 unknowns a node in place of one of 5
-    (the collector bar slot at 204k DOFs: 0.58 of the subdomain Newton's time). Not the
-    default: from a cold start, where full steps run away, the slot at 17k DOFs met an
-    iterate at which the sweep left the interface GMRES stalled (100 iterations, the
-    residual 0.999 of its start), and the line search failed for that instead of the
-    runaway.
+    With ``split`` (the default), a strip of T or φ and u is solved by one sweep over (T, φ),
+    then u, each factorised (:data:`~subdomain_contact.solvers.SWEEP_DIRECT`): exact but for
+    the contacts' laws of the pressure, two factorisations of 2 and 3 unknowns a node in place
+    of one of 5 (the collector bar slot, 2 ranks, nested: 0.64 of the subdomain Newton's time
+    at 65.9k DOFs, 0.58 at 204k; at 1.07M DOFs 5.63 GB of factors where the whole strip takes
+    10.6). Where the sweep leaves the interface Krylov short (the slot's cold climb, where the
+    pressure law's contacts change state), that Jacobian's strip is factorised whole
+    (:meth:`StripSolve.solve_whole`). A strip of one field, or of T and φ alone, is factorised
+    whole; ``split=False`` factorises every strip whole.
     """
 
     layers: int = 10
     share: float = 0.25
     narrowest: int = 1
-    split: bool = False
+    split: bool = True
     cut: str = "robin"
     prefix: str = "sc_strip_"
     name: str = "sparse strip"
@@ -323,9 +324,10 @@ class StripSolve:
                 self.comm,
                 f"sparse strip corrector ({self.K.getSize()[0]} rows)",
                 "block low-rank factors (-sc_strip_mat_mumps_icntl_35 2 "
-                "-sc_strip_mat_mumps_cntl_7 1e-5), the strip split by fields "
-                "(SparseStrip(split=True): about half the factors with T, φ and u), fewer "
-                "ranks per node, or a narrower strip (SparseStrip(layers=..., share=...))",
+                "-sc_strip_mat_mumps_cntl_7 1e-5), the strip split by fields where it is not "
+                "(SparseStrip(split=True), the default: about half the factors with T, φ and "
+                "u), fewer ranks per node, or a narrower strip (SparseStrip(layers=..., "
+                "share=...))",
             )
         data = None if self.plan is None else self.plan.values(system)
         if data is not None:  # the same entries: MUMPS keeps its analysis

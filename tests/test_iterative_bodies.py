@@ -366,9 +366,12 @@ def test_a_strip_that_would_not_fit_again_is_kept_then_refused_by_a_clear_error(
         # the first build's two (ten layers, then one: no memory left for ten), never again
         assert (linear.strip.narrowed_from, linear.strip.factorisations) == (10, 2)
         assert linear.kept_for_memory >= 1  # it served on before it had to be rebuilt
-        # what the refusal weighed: the ranks' MUMPS INFO(22) (one node here), with its margin
-        factor = linear.strip.ksp.getPC().getFactorMatrix()
-        used = comm.allreduce(1e6 * factor.getMumpsInfo(22))
+        # what the refusal weighed: the ranks' MUMPS INFO(22) (one node here), with its
+        # margin, over both splits of the strip's sweep (T, u: split by default)
+        pc = linear.strip.ksp.getPC()
+        assert pc.getType() == "fieldsplit"
+        factors = [sub.getPC().getFactorMatrix() for sub in pc.getFieldSplitSubKSP()]
+        used = comm.allreduce(sum(1e6 * f.getMumpsInfo(22) for f in factors))
         need, available = solvers_module.refactorisation_memory(linear.strip.ksp, comm)
         assert used > 0 and available == 0.0
         assert need == pytest.approx(solvers_module.REFACTORISATION_MARGIN * used, rel=1e-14)
