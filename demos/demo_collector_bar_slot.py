@@ -102,8 +102,8 @@ def say(*text: object) -> None:
 
 
 # Mesh sizes [m] away from the slot and on the contacts: --small (about 17k DOFs) for the
-# tests, the default (about 65k DOFs) for the figures in the README. Both run the design study
-# (the 174 mm bar, 2 mm of cast iron above it), by the first route only.
+# tests, the default (about 65k DOFs) for the figures of docs/collector_bar_slot.md. Both run
+# the design study (the 174 mm bar, 2 mm of cast iron above it), by the first route only.
 size, fine = (0.12, 0.04) if args.small else (0.06, 0.02)
 size, fine = args.size or size, args.fine or fine
 
@@ -424,10 +424,11 @@ for setup in args.setups if len(HEIGHTS) == 2 else ():
 # monolithic Newton with the field split (`split`: the discretisation is studied, not the
 # routes, and this one needs the least time and memory: 419k DOFs in 6.2 GB a rank on 2
 # ranks). Meshed anew at each size, the cast iron keeps its layers across its thickness
-# and the DOFs grew 3.1 to 4.6 times per halving, too irregular for an order (README). The
-# first refinement changes the cells' shapes (tests/test_thermal_contact.py), so the order is
-# read on the three refined meshes: p = log₂((V₁ − V₂)/(V₂ − V₃)) and, where p > 0 (the
-# differences shrink), the Richardson extrapolation V₃ + (V₃ − V₂)/(2^p − 1). Not at --small.
+# and the DOFs grew 3.1 to 4.6 times per halving, too irregular for an order
+# (docs/collector_bar_slot.md). The first refinement changes the cells' shapes
+# (tests/test_thermal_contact.py), so the order is read on the three refined meshes:
+# p = log₂((V₁ − V₂)/(V₂ − V₃)) and, where p > 0 (the differences shrink), the Richardson
+# extrapolation V₃ + (V₃ − V₂)/(2^p − 1). Not at --small.
 REFINEMENTS = 3
 convergence = {}
 for setup in () if args.no_study or args.small else args.setups:

@@ -118,7 +118,7 @@ class Monolithic:
             runs; each step is still solved to the Krylov tolerance. For Jacobians that move
             little from step to step: on the collector bar slot at 1.14M DOFs (the field
             split in single precision) four of five kept factorisations failed their budget
-            and the fine level took 982 s against 736 s (README).
+            and the fine level took 982 s against 736 s (docs/collector_bar_slot.md).
 
     Call :meth:`destroy` (collectively) when done.
     """
@@ -373,7 +373,7 @@ class Monolithic:
         recurrence, which drifts from the true one by the round-off of the preconditioner's
         applications: with factors in single precision and block low-rank, the slot at 1.2M
         DOFs reached Newton's 1.1e-4 as with full-rank factors, then 1.4e-5 where they gave
-        9.1e-8, and cycled at 8e-6 (README). The iterations count every solve.
+        9.1e-8, and cycled at 8e-6 (docs/collector_bar_slot.md). The iterations count every solve.
         """
         ksp, iterations, restarts = self.ksp, 0, 0
         seconds = self._clock(lambda: ksp.solve(rhs, x))

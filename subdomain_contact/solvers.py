@@ -69,7 +69,8 @@ FIELD_SWEEP: Mapping[str, str] = MappingProxyType(
 #: constant setup, monolithic Newton from 1233 K, 2 ranks (one run each, 2026-11-29): 16
 #: Newton steps, 4–8 GMRES iterations a step (33 at one limited step), 244.7 s against MUMPS
 #: on the whole 381.4 s; MUMPS's memory 376 + 812 MB on its largest rank against 2,196 MB.
-#: Nested from 11.5k DOFs (the demo's `--linear split`): 101.8 s against 166.5 s (README).
+#: Nested from 11.5k DOFs (the demo's `--linear split`): 101.8 s against 166.5 s
+#: (docs/collector_bar_slot.md).
 FIELDSPLIT_DIRECT: Mapping[str, str] = MappingProxyType(
     FIELD_SWEEP
     | {
