@@ -16,7 +16,11 @@ solves the subdomain route's bodies by GMRES + GAMG per field; ``--no-monolithic
 monolithic Newton out where it does not fit; ``--history`` prints each Newton's iterates,
 ``--progress`` a line per iterate as it comes; ``--gamg`` also runs the monolithic Newton
 with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, stopping at Newton's tolerance
-per field) and prints its outcome, ``--gamg-only`` that Newton alone. ``--mumps-estimate``
+per field) and prints its outcome, ``--gamg-only`` that Newton alone; ``--splits direct
+single`` also runs the monolithic Newton by GMRES on one sweep over (T, φ), then u, each
+factorised by MUMPS (``sc.FIELDSPLIT_DIRECT``; ``single``: in single precision with block
+low-rank factors, ``sc.FIELDSPLIT_SINGLE``, the collector bar slot's route at ≥ 1M DOFs),
+after the others (alone with ``--no-monolithic --no-subdomain``). ``--mumps-estimate``
 runs no Newton: it prints MUMPS's own estimate of the monolithic factorisation's memory
 (INFOG(16), INFOG(17), in-core, after its analysis of the merged Jacobian at 300 K; the
 factorisation is then refused by a 1 MB cap, ICNTL(23)), to set beside the measured peaks
@@ -41,10 +45,18 @@ from verification.memory import mumps_estimate as estimate
 from verification.memory import resident
 from verification.nodal import NodalReference, error_against, field_values
 
+#: --splits: the monolithic Newton's options for each.
+SPLITS = {"direct": sc.FIELDSPLIT_DIRECT, "single": sc.FIELDSPLIT_SINGLE}
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--sizes", type=float, nargs="+", default=[0.05, 0.025, 0.012])
 parser.add_argument("--count", type=int, default=4, help="number of blocks")
-parser.add_argument("--no-monolithic", action="store_true", help="subdomain Newton only")
+parser.add_argument("--no-monolithic", action="store_true", help="no monolithic MUMPS Newton")
+parser.add_argument("--no-subdomain", action="store_true", help="no subdomain Newton")
+parser.add_argument(
+    "--splits", nargs="+", default=[], choices=list(SPLITS),
+    help="also the monolithic Newton by GMRES on a sweep over (T, φ), then u (each split "
+    "factorised in double, or in single precision with block low-rank factors)",
+)  # fmt: skip
 parser.add_argument(
     "--bodies", default="auto", choices=["auto", "direct", "iterative"],
     help="the subdomain route's body solves (sc.System's solver): auto is iterative for a "
@@ -116,11 +128,15 @@ if comm.rank == 0:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
-def gamg(size: float, reference, against: str) -> None:
-    """Print the outcome of the monolithic Newton by GMRES + field-split GAMG."""
-    linear = sc.Monolithic(sc.FIELDSPLIT_GAMG, inexact=True)
-    # The subdomain Newton's placement; at 218,790 DOFs on 2 ranks this Newton took the same
-    # time either way (335.2 s on groups, 340.8 s spread, 2026-11-29).
+def gamg(size: float, reference, against: str, split: str | None = None) -> None:
+    """Print the outcome of the monolithic Newton by GMRES + field-split GAMG (or MUMPS)."""
+    if split is None:
+        linear, name = sc.Monolithic(sc.FIELDSPLIT_GAMG, inexact=True), "field-split GAMG"
+    else:
+        linear = sc.Monolithic(SPLITS[split], splits=sc.THERMOELECTRIC_MECHANICAL)
+        name = f"field split, MUMPS {'single' if split == 'single' else 'double'}"
+    # The subdomain Newton's placement; at 218,790 DOFs on 2 ranks the GAMG Newton took the
+    # same time either way (335.2 s on groups, 340.8 s spread, 2026-11-29).
     scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
     try:
         result, seconds, memory, _, difference = newton(scene, linear, reference)
@@ -133,7 +149,7 @@ def gamg(size: float, reference, against: str) -> None:
         outcome = f"failed: {str(failure).splitlines()[0]}"
     linear.destroy()
     if comm.rank == 0:
-        print(f"size {size}, monolithic GMRES + field-split GAMG: {outcome}", flush=True)
+        print(f"size {size}, monolithic GMRES + {name}: {outcome}", flush=True)
 
 
 for size in args.sizes:
@@ -147,11 +163,14 @@ for size in args.sizes:
             blocks_row_scene(args.count, size, comm=comm, placement="shared"), monolithic
         )
         monolithic.destroy()
-    scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
-    sub, sub_seconds, sub_memory, dofs, difference = newton(
-        scene, sc.Subdomains(), reference, args.bodies
-    )
-    if comm.rank == 0:
+    if args.no_subdomain:  # the monolithic routes' own
+        sub = None
+    else:
+        scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
+        sub, sub_seconds, sub_memory, dofs, difference = newton(
+            scene, sc.Subdomains(), reference, args.bodies
+        )
+    if comm.rank == 0 and sub is not None:
         total = sum(v for k, v in dofs.items() if k != "masters")
         rounds = sum(s.inner_rounds for s in sub.history)
         print(
@@ -168,7 +187,10 @@ for size in args.sizes:
             print(f"subdomain Newton:\n{sub.table()}", flush=True)
             if mono is not None:
                 print(f"monolithic Newton:\n{mono.table()}", flush=True)
-    if args.gamg and mono is not None:
-        gamg(size, reference, "MUMPS")
-    elif args.gamg:  # the subdomain Newton's solution (its references) as the reference
-        gamg(size, difference, "the subdomain Newton")
+    # the others against MUMPS's solution, else the subdomain Newton's (its references)
+    against = "MUMPS" if mono is not None else "the subdomain Newton"
+    if mono is None:
+        reference = None if sub is None else difference
+    against = against if reference is not None else "no reference"
+    for split in ([None] if args.gamg else []) + args.splits:
+        gamg(size, reference, against, split)
