@@ -128,13 +128,14 @@ if comm.rank == 0:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
-def gamg(size: float, reference, against: str, split: str | None = None) -> None:
-    """Print the outcome of the monolithic Newton by GMRES + field-split GAMG (or MUMPS)."""
+def field_split(size: float, reference, against: str, split: str | None = None) -> None:
+    """Print the outcome of the monolithic Newton by GMRES on a field split: of GAMG (no
+    ``split``), or of MUMPS (``split``, a key of :data:`SPLITS`)."""
     if split is None:
         linear, name = sc.Monolithic(sc.FIELDSPLIT_GAMG, inexact=True), "field-split GAMG"
     else:
         linear = sc.Monolithic(SPLITS[split], splits=sc.THERMOELECTRIC_MECHANICAL)
-        name = f"field split, MUMPS {'single' if split == 'single' else 'double'}"
+        name = f"field split, MUMPS ({split})"
     # The subdomain Newton's placement; at 218,790 DOFs on 2 ranks the GAMG Newton took the
     # same time either way (335.2 s on groups, 340.8 s spread, 2026-11-29).
     scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
@@ -154,7 +155,7 @@ def gamg(size: float, reference, against: str, split: str | None = None) -> None
 
 for size in args.sizes:
     if args.gamg_only:  # where the two other routes' times are known from their own runs
-        gamg(size, None, "no reference")
+        field_split(size, None, "no reference")
         continue
     mono, mono_seconds, mono_memory, reference = None, float("nan"), float("nan"), None
     if not args.no_monolithic:
@@ -188,9 +189,8 @@ for size in args.sizes:
             if mono is not None:
                 print(f"monolithic Newton:\n{mono.table()}", flush=True)
     # the others against MUMPS's solution, else the subdomain Newton's (its references)
-    against = "MUMPS" if mono is not None else "the subdomain Newton"
     if mono is None:
         reference = None if sub is None else difference
-    against = against if reference is not None else "no reference"
+    against = "MUMPS" if mono is not None else "the subdomain Newton" if sub else "no reference"
     for split in ([None] if args.gamg else []) + args.splits:
-        gamg(size, reference, against, split)
+        field_split(size, reference, against, split)
