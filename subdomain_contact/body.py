@@ -29,7 +29,9 @@ never a new sparse factorisation. A body spread over several ranks is factorised
 A body solved *iteratively* (a large 3D body, where a sparse factorisation grows far faster
 than the mesh) solves ``A`` by CG (GMRES where ``A`` is not symmetric) preconditioned by
 smoothed-aggregation AMG (PETSc's GAMG) with its kernel modes as the near-null space; its
-interface operator is only ever applied, one solve per application.
+interface operator is only ever applied, one solve per application. A large 3D body of T or φ
+and of u is solved that way too, by GMRES on one sweep over its (T, φ) and u blocks, each
+factorised (:data:`FACTORISED_SWEEP`).
 """
 
 from __future__ import annotations
@@ -52,16 +54,19 @@ from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor, condensation
 from subdomain_contact.solvers import (
+    BLOCK_LOW_RANK,
     DIRECT,
+    THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
     make_ksp,
     ordered,
     ordering,
     refuse_refactorisation,
+    set_up,
 )
 
-__all__ = ["ITERATIVE", "SPLIT", "SPLIT_FIELD", "Body"]
+__all__ = ["FACTORISED_SWEEP", "ITERATIVE", "SOLVERS", "SPLIT", "SPLIT_FIELD", "Body"]
 
 #: A body solved iteratively: CG (``ksp_type`` becomes GMRES for a body whose matrix is not
 #: symmetric) preconditioned by PETSc's smoothed-aggregation AMG, to the relative
@@ -105,6 +110,30 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "gamg", "pc_gamg_threshold": "0.02"}
 )
 
+#: A body of T or φ and of u solved by GMRES on one block Gauss-Seidel sweep over (T, φ), then
+#: u (:data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`), each split's block
+#: factorised by MUMPS in single precision with block low-rank factors (``pc_precision``,
+#: :data:`~subdomain_contact.solvers.BLOCK_LOW_RANK`): the monolithic Newton's
+#: ``FIELDSPLIT_SINGLE`` on one body. The sweep is exact but for the contacts' dependence on
+#: u, and GMRES on the true residual makes up for the precision, so a solve is a few pairs of
+#: triangular solves on two factorisations of 2 and 3 unknowns a node, which fit where one of
+#: 5 does not. Where a 3D body of several fields is too large to factorise whole, this
+#: replaces GAMG per field, whose Krylov solves (10-25 iterations each, tens of them per
+#: Newton step) kept the collector bar slot at 1.07M DOFs from converging in two hours
+#: (docs/collector_bar_slot.md).
+FACTORISED_SWEEP: Mapping[str, str] = MappingProxyType(
+    SPLIT
+    | {
+        f"fieldsplit_{split}_{k}": v
+        for split in THERMOELECTRIC_MECHANICAL
+        for k, v in (DIRECT | {"pc_precision": "single"} | BLOCK_LOW_RANK).items()
+    }
+)
+
+#: How a body is solved: factorised whole (``direct``), by Krylov + AMG (``iterative``), or
+#: by GMRES on the factorised sweep over its fields (``split``, :data:`FACTORISED_SWEEP`).
+SOLVERS = ("direct", "iterative", "split")
+
 #: Refinements of an iterative solve of a body of several fields, at most, while one
 #: field's residual is above the tolerance relative to its own scale.
 FIELD_REFINEMENTS = 3
@@ -145,8 +174,10 @@ class Body:
             Schur block, or for a thin body its ``S^α`` by multi-column solves
             (:func:`~subdomain_contact.schur.condensation`); otherwise the whole body matrix
             is factorised and ``S^α`` applied by body solves.
-        iterative: Solve the body by Krylov + AMG (:data:`ITERATIVE`, options under
-            ``prefix``) instead of a factorisation.
+        solver: One of :data:`SOLVERS`: ``"direct"`` (a factorisation), ``"iterative"``
+            (Krylov + AMG, :data:`ITERATIVE` or :data:`SPLIT`) or ``"split"`` (GMRES on the
+            factorised sweep, :data:`FACTORISED_SWEEP`, for a body of T or φ and of u);
+            options under ``prefix`` win.
 
     Call :meth:`destroy` (collectively) when done.
     """
@@ -159,7 +190,7 @@ class Body:
         *,
         prefix: str,
         schur: bool = True,
-        iterative: bool = False,
+        solver: str = "direct",
     ) -> None:
         self.forms: BodyForms = body_forms(problem, body)
         self.name, self.U, W = body.name, self.forms.U, self.forms.W
@@ -177,9 +208,21 @@ class Body:
         self._index_contact_dofs(contact_dofs(self.forms, body.facet_tags, list(layers)))
         self._index_fields()
         self._compile()
-        self.iterative = iterative
+        if solver not in SOLVERS:
+            raise ValueError(f"solver='{solver}' of body '{self.name}': give one of {SOLVERS}")
+        groups = [s for s, f in THERMOELECTRIC_MECHANICAL.items() if set(f) & set(problem.fields)]
+        if solver == "split" and len(groups) < 2:
+            raise ValueError(
+                f"-{prefix}solver split: body '{self.name}' has the fields "
+                f"{', '.join(problem.fields)}; the sweep needs T or φ, and u (use direct or "
+                "iterative)"
+            )
+        #: Solved by a Krylov method (AMG, or the factorised sweep), not one factorisation.
+        self.iterative = solver != "direct"
+        #: Solved by GMRES on the factorised sweep (:data:`FACTORISED_SWEEP`).
+        self.split = solver == "split"
         contact = len(self.kept)
-        alone = schur and not iterative and self.comm.size == 1 and 0 < contact
+        alone = schur and not self.iterative and self.comm.size == 1 and 0 < contact
         how = condensation(contact, self.size, self.dim) if alone else ""
         self.schur = how == "block"
         #: A thin body: factorised whole, its ``S^α`` formed densely by multi-column solves.
@@ -547,19 +590,29 @@ class Body:
             MemoryError: Factorising it again would not fit in a node's memory left; said
                 before ``A`` takes new values (the kept factors still solve the old ones).
         """
-        if self.ksp is not None and not self.iterative:
+        if self.ksp is not None and self.split:
+            refuse_refactorisation(
+                self.ksp,
+                self.comm,
+                f"body '{self.name}' ({self._A.getSize()[0]} DOFs, its two splits)",
+                f"the body solved by AMG (-{self.prefix}solver iterative), or fewer ranks per node",
+            )
+        elif self.ksp is not None and not self.iterative:
             refuse_refactorisation(
                 self.ksp,
                 self.comm,
                 f"body '{self.name}' ({self._A.getSize()[0]} DOFs)",
-                f"the body solved iteratively (-{self.prefix}solver iterative), block low-rank "
-                f"factors (-{self.prefix}mat_mumps_icntl_35 2 -{self.prefix}mat_mumps_cntl_7 "
-                "1e-5), or fewer ranks per node",
+                f"the body solved iteratively (-{self.prefix}solver split or iterative), "
+                f"block low-rank factors (-{self.prefix}mat_mumps_icntl_35 2 "
+                f"-{self.prefix}mat_mumps_cntl_7 1e-5), or fewer ranks per node",
             )
         self.whole_matrix()
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
-        if self.ksp is None and self.iterative and len(self.forms.fields) > 1:
+        if self.ksp is None and self.split:
+            splits = self._sweep_splits()
+            self.ksp = make_ksp(self._A, self.prefix, FACTORISED_SWEEP, splits=splits)
+        elif self.ksp is None and self.iterative and len(self.forms.fields) > 1:
             options = dict(SPLIT)
             for name in self.forms.fields:
                 options |= {f"fieldsplit_{name}_{k}": v for k, v in SPLIT_FIELD.items()}
@@ -573,7 +626,7 @@ class Body:
             self.ksp = make_ksp(self._A, self.prefix, options)
         elif self.iterative:
             self.ksp.setOperators(self._A)
-            self.ksp.setUp()
+            set_up(self.ksp)  # the sweep's splits factorised now, not at the first solve
         else:
             what = f"body '{self.name}'"
             again = not self.is_linear
@@ -606,6 +659,18 @@ class Body:
                 iset.compose("nearnullspace", space)
                 self._near_null.append(space)
             splits.append((name, iset))
+        return splits
+
+    def _sweep_splits(self) -> list[tuple[str, PETSc.IS]]:
+        """The owned DOFs (global, ascending) of (T, φ) and of u, for :data:`FACTORISED_SWEEP`."""
+        fields = dict(self._field_splits())
+        splits = []
+        for split, names in THERMOELECTRIC_MECHANICAL.items():
+            sets = [fields[name] for name in names if name in fields]
+            indices = np.sort(np.concatenate([s.getIndices() for s in sets]))
+            iset = PETSc.IS().createGeneral(indices.astype(PETSc.IntType), comm=self.comm)
+            self._near_null.append(iset)
+            splits.append((split, iset))
         return splits
 
     def _near_null_space(self) -> PETSc.NullSpace:

@@ -22,10 +22,11 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from subdomain_contact.body import Body
+from subdomain_contact.body import SOLVERS, Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
 from subdomain_contact.scene import iterative_by_size
+from subdomain_contact.solvers import THERMOELECTRIC_MECHANICAL
 
 __all__ = ["LawRangeError", "System"]
 
@@ -59,18 +60,26 @@ def _assign(body: Body, pairs) -> bool:
     return bool(changed)
 
 
-def _iterative(problem: Problem, body, solver: str, prefix: str) -> bool:
-    """Whether a body is solved by Krylov + AMG: the option, else ``solver``, else the rule."""
+def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
+    """How a body is solved (:data:`~subdomain_contact.body.SOLVERS`).
+
+    The option, else ``solver``, else the rule: a large 3D body
+    (:func:`~subdomain_contact.scene.iterative_by_size`) of T or φ and of u by the factorised
+    sweep, any other large one by AMG, the rest factorised.
+    """
     options = PETSc.Options()
     if options.hasName(prefix + "solver"):
         solver = options.getString(prefix + "solver")
-        if solver not in ("direct", "iterative"):
-            raise ValueError(f"-{prefix}solver {solver}: give 'direct' or 'iterative'")
+        if solver not in SOLVERS:
+            raise ValueError(f"-{prefix}solver {solver}: give one of {', '.join(SOLVERS)}")
     if solver != "auto":
-        return solver == "iterative"
+        return solver
     mesh = body.mesh
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    return iterative_by_size(mesh, per_node)
+    if not iterative_by_size(mesh, per_node):
+        return "direct"
+    groups = [s for s, f in THERMOELECTRIC_MECHANICAL.items() if set(f) & set(problem.fields)]
+    return "split" if len(groups) == 2 else "iterative"
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
@@ -98,10 +107,12 @@ class System:
         schur: Factorise a body held by one rank with its contact DOFs left as a dense Schur
             block (False: factorise every body whole, as a body on several ranks is).
         solver: How the bodies are solved: ``"direct"`` (MUMPS), ``"iterative"`` (Krylov +
-            AMG, :data:`~subdomain_contact.body.ITERATIVE`) or ``"auto"``: iterative for a
-            body meshed in 3D whose largest front exceeds ``scene.FRONT_ABOVE`` DOFs
-            (:func:`~subdomain_contact.scene.iterative_by_size`). The option
-            ``-<prefix>body_<name>_solver direct|iterative`` wins for that body.
+            AMG, :data:`~subdomain_contact.body.ITERATIVE`), ``"split"`` (GMRES on the
+            factorised sweep over (T, φ), then u, :data:`~subdomain_contact.body.FACTORISED_SWEEP`)
+            or ``"auto"``: for a body meshed in 3D whose largest front exceeds
+            ``scene.FRONT_ABOVE`` DOFs (:func:`~subdomain_contact.scene.iterative_by_size`),
+            split where the problem has T or φ and u, else iterative; direct otherwise. The
+            option ``-<prefix>body_<name>_solver direct|iterative|split`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.
     """
@@ -109,8 +120,8 @@ class System:
     def __init__(
         self, problem: Problem, *, prefix: str = "sc_", schur: bool = True, solver: str = "auto"
     ) -> None:
-        if solver not in ("auto", "direct", "iterative"):
-            raise ValueError(f"solver='{solver}': give 'auto', 'direct' or 'iterative'")
+        if solver not in ("auto", *SOLVERS):
+            raise ValueError(f"solver='{solver}': give 'auto' or one of {', '.join(SOLVERS)}")
         scene = problem.scene
         self.problem, self.comm, self.prefix = problem, scene.comm, prefix
         gc.collect()  # what earlier systems left: petsc4py hands it to PETSc's garbage,
@@ -133,7 +144,7 @@ class System:
                     at = f"{prefix}body_{name}_"
                     self.bodies[name] = Body(
                         problem, body, mine, prefix=at, schur=schur,
-                        iterative=_iterative(problem, body, solver, at),
+                        solver=_solver(problem, body, solver, at),
                     )  # fmt: skip
                 except ValueError as error:
                     failure = error
