@@ -110,17 +110,17 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "gamg", "pc_gamg_threshold": "0.02"}
 )
 
-#: A body of T or φ and of u solved by GMRES on one block Gauss-Seidel sweep over (T, φ), then
-#: u (:data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`), each split's block
-#: factorised by MUMPS in single precision with block low-rank factors (``pc_precision``,
-#: :data:`~subdomain_contact.solvers.BLOCK_LOW_RANK`): the monolithic Newton's
-#: ``FIELDSPLIT_SINGLE`` on one body. The sweep is exact but for the contacts' dependence on
-#: u, and GMRES on the true residual makes up for the precision, so a solve is a few pairs of
-#: triangular solves on two factorisations of 2 and 3 unknowns a node, which fit where one of
-#: 5 does not. Where a 3D body of several fields is too large to factorise whole, this
-#: replaces GAMG per field, whose Krylov solves (10-25 iterations each, tens of them per
-#: Newton step) kept the collector bar slot at 1.07M DOFs from converging in two hours
-#: (docs/collector_bar_slot.md).
+#: A body of T or φ and of u solved by GMRES on one block Gauss-Seidel sweep over (T, φ), then u
+#: (:data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`), each split's block factorised by
+#: MUMPS in single precision with block low-rank factors (``pc_precision``,
+#: :data:`~subdomain_contact.solvers.BLOCK_LOW_RANK`): the monolithic Newton's ``FIELDSPLIT_SINGLE``
+#: on one body (GMRES left-preconditioned here, as :data:`SPLIT`). The sweep is exact but for the
+#: contacts' dependence on u, and GMRES makes up for it and for the precision (each field's true
+#: residual checked after, :meth:`Body._solve_whole`), so a solve is a few pairs of triangular
+#: solves on two factorisations of 2 and 3 unknowns a node, which fit where one of 5 does not. Where
+#: a 3D body of several fields is too large to factorise whole, this replaces GAMG per field, whose
+#: Krylov solves (10-25 iterations each, tens of them per Newton step) kept the collector bar slot
+#: at 1.07M DOFs from converging in two hours (docs/collector_bar_slot.md).
 FACTORISED_SWEEP: Mapping[str, str] = MappingProxyType(
     SPLIT
     | {
