@@ -192,6 +192,7 @@ for size in args.sizes:
     # the others against MUMPS's solution, else the subdomain Newton's (its references)
     if mono is None:
         reference = None if sub is None else difference
-    against = "MUMPS" if mono is not None else "the subdomain Newton" if sub else "no reference"
+    against = "MUMPS" if mono is not None else "the subdomain Newton"
+    against = against if reference is not None else "no reference"
     for split in ([None] if args.gamg else []) + args.splits:
         field_split(size, reference, against, split)

@@ -64,6 +64,7 @@ from subdomain_contact.solvers import (
     ordering,
     refuse_refactorisation,
     set_up,
+    sweepable,
 )
 
 __all__ = ["FACTORISED_SWEEP", "ITERATIVE", "SOLVERS", "SPLIT", "SPLIT_FIELD", "Body"]
@@ -210,8 +211,7 @@ class Body:
         self._compile()
         if solver not in SOLVERS:
             raise ValueError(f"solver='{solver}' of body '{self.name}': give one of {SOLVERS}")
-        groups = [s for s, f in THERMOELECTRIC_MECHANICAL.items() if set(f) & set(problem.fields)]
-        if solver == "split" and len(groups) < 2:
+        if solver == "split" and not sweepable(problem.fields):
             raise ValueError(
                 f"-{prefix}solver split: body '{self.name}' has the fields "
                 f"{', '.join(problem.fields)}; the sweep needs T or φ, and u (use direct or "
@@ -590,22 +590,17 @@ class Body:
             MemoryError: Factorising it again would not fit in a node's memory left; said
                 before ``A`` takes new values (the kept factors still solve the old ones).
         """
-        if self.ksp is not None and self.split:
-            refuse_refactorisation(
-                self.ksp,
-                self.comm,
-                f"body '{self.name}' ({self._A.getSize()[0]} DOFs, its two splits)",
-                f"the body solved by AMG (-{self.prefix}solver iterative), or fewer ranks per node",
-            )
-        elif self.ksp is not None and not self.iterative:
-            refuse_refactorisation(
-                self.ksp,
-                self.comm,
-                f"body '{self.name}' ({self._A.getSize()[0]} DOFs)",
-                f"the body solved iteratively (-{self.prefix}solver split or iterative), "
+        if self.ksp is not None and (self.split or not self.iterative):
+            parts = ", its two splits" if self.split else ""
+            what = f"body '{self.name}' ({self._A.getSize()[0]} DOFs{parts})"
+            advice = (
+                f"the body solved by AMG (-{self.prefix}solver iterative)"
+                if self.split
+                else f"the body solved iteratively (-{self.prefix}solver split or iterative), "
                 f"block low-rank factors (-{self.prefix}mat_mumps_icntl_35 2 "
-                f"-{self.prefix}mat_mumps_cntl_7 1e-5), or fewer ranks per node",
+                f"-{self.prefix}mat_mumps_cntl_7 1e-5)"
             )
+            refuse_refactorisation(self.ksp, self.comm, what, f"{advice}, or fewer ranks per node")
         self.whole_matrix()
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
@@ -663,11 +658,13 @@ class Body:
 
     def _sweep_splits(self) -> list[tuple[str, PETSc.IS]]:
         """The owned DOFs (global, ascending) of (T, φ) and of u, for :data:`FACTORISED_SWEEP`."""
-        fields = dict(self._field_splits())
         splits = []
         for split, names in THERMOELECTRIC_MECHANICAL.items():
-            sets = [fields[name] for name in names if name in fields]
-            indices = np.sort(np.concatenate([s.getIndices() for s in sets]))
+            rows = []
+            for name in (n for n in names if n in self.forms.fields):
+                V, parent_of = self.forms.collapsed(name)
+                rows.append(parent_of[: V.dofmap.index_map.size_local * V.dofmap.index_map_bs])
+            indices = np.sort(np.concatenate(rows)) + self.start
             iset = PETSc.IS().createGeneral(indices.astype(PETSc.IntType), comm=self.comm)
             self._near_null.append(iset)
             splits.append((split, iset))

@@ -42,6 +42,7 @@ from subdomain_contact.solvers import (
     refactorisation_memory,
     refactorisation_shortfall,
     refuse_refactorisation,
+    sweepable,
 )
 from subdomain_contact.system import System
 
@@ -350,9 +351,7 @@ class StripSolve:
     @property
     def swept(self) -> bool:
         """Whether the strip is solved by the sweep over its fields at this Jacobian."""
-        fields = self.fields
-        split = self.split and "displacement" in fields and len(fields) > 1
-        return split and not self._whole_now
+        return self.split and sweepable(self.fields) and not self._whole_now
 
     def whole_fits(self) -> bool:
         """Whether the whole strip's factorisation fits where the sweep's two are freed.

@@ -30,6 +30,7 @@ __all__ = [
     "refactorisation_shortfall",
     "refuse_refactorisation",
     "set_up",
+    "sweepable",
 ]
 
 #: Sparse direct solve by MUMPS (the factorisation is kept and reused).
@@ -44,6 +45,12 @@ DIRECT: Mapping[str, str] = MappingProxyType(
 THERMOELECTRIC_MECHANICAL: Mapping[str, tuple[str, ...]] = MappingProxyType(
     {"thermoelectric": ("temperature", "potential"), "displacement": ("displacement",)}
 )
+
+
+def sweepable(fields: Sequence[str]) -> bool:
+    """Whether ``fields`` fill both splits of :data:`THERMOELECTRIC_MECHANICAL`: T or φ, and u."""
+    return all(set(f) & set(fields) for f in THERMOELECTRIC_MECHANICAL.values())
+
 
 #: GMRES (right-preconditioned: the true residual, rows in W, A and N) on one block
 #: Gauss-Seidel sweep over named splits (PETSc's multiplicative ``fieldsplit``): the frame of

@@ -26,7 +26,7 @@ from subdomain_contact.body import SOLVERS, Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
 from subdomain_contact.scene import iterative_by_size
-from subdomain_contact.solvers import THERMOELECTRIC_MECHANICAL
+from subdomain_contact.solvers import sweepable
 
 __all__ = ["LawRangeError", "System"]
 
@@ -78,8 +78,7 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
     if not iterative_by_size(mesh, per_node):
         return "direct"
-    groups = [s for s, f in THERMOELECTRIC_MECHANICAL.items() if set(f) & set(problem.fields)]
-    return "split" if len(groups) == 2 else "iterative"
+    return "split" if sweepable(problem.fields) else "iterative"
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
