@@ -184,7 +184,7 @@ for size in args.sizes:
             flush=True,
         )
         if sub.fallbacks:
-            print(f"bodies factorised where their Krylov solve failed: {sub.fallbacks}")
+            print(f"bodies factorised anew (Krylov failed or short): {sub.fallbacks}")
         if args.history:
             print(f"subdomain Newton:\n{sub.table()}", flush=True)
             if mono is not None:

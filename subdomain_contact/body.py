@@ -56,12 +56,14 @@ from subdomain_contact.schur import CondensedFactor, condensation
 from subdomain_contact.solvers import (
     BLOCK_LOW_RANK,
     DIRECT,
+    REFACTORISATION_MARGIN,
     THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
     make_ksp,
     ordered,
     ordering,
+    refactorisation_memory,
     refuse_refactorisation,
     set_up,
     sweepable,
@@ -129,6 +131,21 @@ FACTORISED_SWEEP: Mapping[str, str] = MappingProxyType(
         for split in THERMOELECTRIC_MECHANICAL
         for k, v in (DIRECT | {"pc_precision": "single"} | BLOCK_LOW_RANK).items()
     }
+)
+
+#: :data:`FACTORISED_SWEEP` with its splits factorised in double precision (block low-rank
+#: kept): a body whose solve by the single-precision sweep stays short of a field's
+#: tolerance after :data:`FIELD_REFINEMENTS` is factorised again so, and keeps it. Single
+#: precision's ε (6e-8) leaves little of a split whose condition number nears 1e7: on the
+#: row of four 3D blocks (``cases.squeezed_row``, the inner two floating, held in u by their
+#: contacts alone) the floating block 1's solves ended 282, 676 and 2,670 times short at
+#: 10,460, 18,495 and 31,420 DOFs (the other bodies' within theirs, refined), and
+#: from 18,495 DOFs the interface Krylov failed at the first Newton step (true residual 7e6
+#: and 1.6e20 times its tolerance), and Newton with it; block 1 in double: 13 Newton steps,
+#: as the monolithic Newton, the others kept single.
+FACTORISED_SWEEP_DOUBLE: Mapping[str, str] = MappingProxyType(
+    FACTORISED_SWEEP
+    | {f"fieldsplit_{split}_pc_precision": "double" for split in THERMOELECTRIC_MECHANICAL}
 )
 
 #: How a body is solved: factorised whole (``direct``), by Krylov + AMG (``iterative``), or
@@ -221,6 +238,9 @@ class Body:
         self.iterative = solver != "direct"
         #: Solved by GMRES on the factorised sweep (:data:`FACTORISED_SWEEP`).
         self.split = solver == "split"
+        #: The sweep's options: single precision until a solve falls short (:meth:`_solve_whole`).
+        self.sweep = FACTORISED_SWEEP
+        self._may_double = self.split  # a short sweep may be factorised again in double
         contact = len(self.kept)
         alone = schur and not self.iterative and self.comm.size == 1 and 0 < contact
         how = condensation(contact, self.size, self.dim) if alone else ""
@@ -233,7 +253,8 @@ class Body:
         self.ksp: PETSc.KSP | None = None
         #: MUMPS on the body's matrix where its Krylov solve failed, until the matrix changes.
         self._direct: PETSc.KSP | None = None
-        #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`).
+        #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`), and
+        #: sweeps factorised again in double precision (:meth:`_sweep_in_double`).
         self.fallbacks = 0
         self._near_null: list[PETSc.Object] = []
         #: Krylov iterations of the body's iterative solves, summed.
@@ -606,7 +627,7 @@ class Body:
         self._direct = None
         if self.ksp is None and self.split:
             splits = self._sweep_splits()
-            self.ksp = make_ksp(self._A, self.prefix, FACTORISED_SWEEP, splits=splits)
+            self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=splits)
         elif self.ksp is None and self.iterative and len(self.forms.fields) > 1:
             options = dict(SPLIT)
             for name in self.forms.fields:
@@ -779,13 +800,37 @@ class Body:
             # 26 and 14 iterations per refinement where 9, 7 and 7 suffice, the same count
             # of refinements; body Krylov 32.8 s → 27.1 s, 13 Newton steps both).
             target = max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
-            for _ in range(FIELD_REFINEMENTS):
+            for refinement in range(FIELD_REFINEMENTS + 1):
                 residual = rhs - self._apply_A(y)
                 shortfall = self._field_residual(residual, rhs, y) / target
-                if shortfall <= 1.0:
+                if shortfall <= 1.0 or refinement == FIELD_REFINEMENTS:
                     break
                 y += self._krylov(residual, rtol=max(target, 0.1 / shortfall))
+            if shortfall > 1.0 and self._may_double and self._sweep_in_double():
+                return self._solve_whole(rhs)
         return y
+
+    def _sweep_in_double(self) -> bool:
+        """Factorise the sweep's splits again in double precision, for the body's life.
+
+        Where the double-precision factors (about twice the single ones) would not fit in the
+        node's memory left once the single ones are freed, the single ones stay, for good:
+        the interface solve checks its true residual and says so if it fails (collective).
+
+        Returns: Whether the splits are now factorised in double precision.
+        """
+        self._may_double = False
+        need, available = refactorisation_memory(self.ksp, self.comm)
+        if available is not None and 2.0 * need > available + need / REFACTORISATION_MARGIN:
+            return False
+        rtol = self.ksp.getTolerances()[0]
+        destroy(self.ksp)
+        self.ksp, self.sweep = None, FACTORISED_SWEEP_DOUBLE
+        self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=self._sweep_splits())
+        self.set_rtol(rtol)
+        self.factorisations += 1
+        self.fallbacks += 1
+        return True
 
     def _krylov(self, rhs: Vector, rtol: float | None = None) -> Vector:
         """One Krylov solve (or solve by the factorisation) of ``A y = rhs``.
