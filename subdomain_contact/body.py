@@ -69,7 +69,15 @@ from subdomain_contact.solvers import (
     sweepable,
 )
 
-__all__ = ["FACTORISED_SWEEP", "ITERATIVE", "SOLVERS", "SPLIT", "SPLIT_FIELD", "Body"]
+__all__ = [
+    "FACTORISED_SWEEP",
+    "FACTORISED_SWEEP_DOUBLE",
+    "ITERATIVE",
+    "SOLVERS",
+    "SPLIT",
+    "SPLIT_FIELD",
+    "Body",
+]
 
 #: A body solved iteratively: CG (``ksp_type`` becomes GMRES for a body whose matrix is not
 #: symmetric) preconditioned by PETSc's smoothed-aggregation AMG, to the relative
