@@ -184,7 +184,10 @@ for size in args.sizes:
             flush=True,
         )
         if sub.fallbacks:
-            print(f"bodies factorised anew (Krylov failed or short): {sub.fallbacks}")
+            print(
+                "body fallbacks (MUMPS for a failed Krylov solve, double for a short sweep, "
+                f"AMG for a sweep without room): {sub.fallbacks}"
+            )
         if args.history:
             print(f"subdomain Newton:\n{sub.table()}", flush=True)
             if mono is not None:

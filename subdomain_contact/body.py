@@ -616,23 +616,24 @@ class Body:
         """``A`` as one sparse matrix, factorised by MUMPS (distributed), or its AMG set up.
 
         Raises:
-            MemoryError: Factorising it again would not fit in a node's memory left; said
-                before ``A`` takes new values (the kept factors still solve the old ones).
+            MemoryError: A direct body's factorising again would not fit in a node's memory
+                left; said before ``A`` takes new values (the kept factors still solve the
+                old ones). A split body makes room instead (:meth:`_room_for_sweep`).
         """
-        if self.ksp is not None and (self.split or not self.iterative):
-            parts = ", its two splits" if self.split else ""
-            what = f"body '{self.name}' ({self._A.getSize()[0]} DOFs{parts})"
-            advice = (
-                f"the body solved by AMG (-{self.prefix}solver iterative)"
-                if self.split
-                else f"the body solved iteratively (-{self.prefix}solver split or iterative), "
-                f"block low-rank factors (-{self.prefix}mat_mumps_icntl_35 2 "
-                f"-{self.prefix}mat_mumps_cntl_7 1e-5)"
-            )
-            refuse_refactorisation(self.ksp, self.comm, what, f"{advice}, or fewer ranks per node")
-        self.whole_matrix()
+        rtol = None if self.ksp is None else self.ksp.getTolerances()[0]  # an iterative one's
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
+        if self.ksp is not None and self.split:
+            self._room_for_sweep()
+        elif self.ksp is not None and not self.iterative:
+            what = f"body '{self.name}' ({self._A.getSize()[0]} DOFs)"
+            advice = (
+                f"the body solved iteratively (-{self.prefix}solver split or iterative), "
+                f"block low-rank factors (-{self.prefix}mat_mumps_icntl_35 2 "
+                f"-{self.prefix}mat_mumps_cntl_7 1e-5), or fewer ranks per node"
+            )
+            refuse_refactorisation(self.ksp, self.comm, what, advice)
+        self.whole_matrix()
         if self.ksp is None and self.split:
             splits = self._sweep_splits()
             self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=splits)
@@ -655,7 +656,32 @@ class Body:
             what = f"body '{self.name}'"
             again = not self.is_linear
             self.ksp = factorise(self._A, self.prefix, what, self.ksp, dim=self.dim, again=again)
+        if rtol is not None:
+            self.set_rtol(rtol)  # where the KSP was made anew
         self.factorisations += 1
+
+    def _drop_ksp(self) -> None:
+        """Free the body's KSP (its factors) and the index sets it was made with."""
+        destroy(self.ksp, *self._near_null)
+        self.ksp, self._near_null = None, []
+
+    def _room_for_sweep(self) -> None:
+        """Make room to factorise the sweep's splits again (collective).
+
+        MUMPS factorises new values beside the old factors (:data:`REFACTORISATION_MARGIN`).
+        Where the node has not that room, the old factors are freed first; where even then
+        the new ones would not fit, the body is solved by AMG (:data:`SPLIT`) for its life.
+        The row of four 3D blocks at 1.01M DOFs (2 ranks, three blocks' sweeps in double
+        precision, 23 GB node) stopped at its second Jacobian: block 0 asked 1.79 GB beside
+        its factors with 1.47 GB left.
+        """
+        need, available = refactorisation_memory(self.ksp, self.comm)
+        if available is None or need <= available:
+            return
+        self._drop_ksp()
+        if need > available + need / REFACTORISATION_MARGIN:  # its factors freed
+            self.split = self._may_double = False
+            self.fallbacks += 1
 
     def _field_splits(self) -> list[tuple[str, PETSc.IS]]:
         """Each field's owned DOFs (global, ascending) for :data:`SPLIT`.
@@ -832,8 +858,8 @@ class Body:
         if available is not None and 2.0 * need > available + need / REFACTORISATION_MARGIN:
             return False
         rtol = self.ksp.getTolerances()[0]
-        destroy(self.ksp)
-        self.ksp, self.sweep = None, FACTORISED_SWEEP_DOUBLE
+        self._drop_ksp()
+        self.sweep = FACTORISED_SWEEP_DOUBLE
         self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=self._sweep_splits())
         self.set_rtol(rtol)
         self.factorisations += 1

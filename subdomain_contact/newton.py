@@ -107,8 +107,9 @@ class Result:
         line_search: The line search that converged.
         shortened: Newton steps that the ``"limited"`` line search shortened.
         fallbacks: Bodies' matrices whose Krylov solve failed and that MUMPS factorised
-            instead, or whose single-precision sweep fell short and was factorised again
-            in double (among the factorisations).
+            instead, whose single-precision sweep fell short and was factorised again in
+            double (these among the factorisations), or whose sweep had no room to be
+            factorised again and that AMG solves since.
     """
 
     history: list[NewtonStep] = field(default_factory=list)
@@ -372,7 +373,7 @@ class _Callbacks:
                 f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
                 f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}"
                 + (f", halvings {step.halvings}" if step.halvings else "")
-                + (f", bodies factorised anew {fallbacks}" if fallbacks else "")
+                + (f", body fallbacks {fallbacks}" if fallbacks else "")
                 + f", {time.perf_counter() - self.start:.0f} s",
                 flush=True,
             )
