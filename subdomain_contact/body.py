@@ -56,14 +56,14 @@ from subdomain_contact.schur import CondensedFactor, condensation
 from subdomain_contact.solvers import (
     BLOCK_LOW_RANK,
     DIRECT,
-    REFACTORISATION_MARGIN,
     THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
+    fits_freed,
     make_ksp,
     ordered,
     ordering,
-    refactorisation_memory,
+    refactorisation_shortfall,
     refuse_refactorisation,
     set_up,
     sweepable,
@@ -668,18 +668,20 @@ class Body:
     def _room_for_sweep(self) -> None:
         """Make room to factorise the sweep's splits again (collective).
 
-        MUMPS factorises new values beside the old factors (:data:`REFACTORISATION_MARGIN`).
-        Where the node has not that room, the old factors are freed first; where even then
-        the new ones would not fit, the body is solved by AMG (:data:`SPLIT`) for its life.
-        The row of four 3D blocks at 1.01M DOFs (2 ranks, three blocks' sweeps in double
-        precision, 23 GB node) stopped at its second Jacobian: block 0 asked 1.79 GB beside
-        its factors with 1.47 GB left.
+        MUMPS factorises new values beside the old factors
+        (:func:`~subdomain_contact.solvers.refactorisation_shortfall`). Where the node has not
+        that room, the old factors are freed first; where even then the new ones would not
+        fit (:func:`~subdomain_contact.solvers.fits_freed`), the body is solved by AMG
+        (:data:`SPLIT`) for its life.
+        The row of four 3D blocks at 1.01M DOFs (2 ranks, 23 GB node, every block by the
+        sweep) stopped at its second Jacobian: block 0 asked 1.79 GB beside its factors with
+        1.47 GB left.
         """
-        need, available = refactorisation_memory(self.ksp, self.comm)
-        if available is None or need <= available:
+        if refactorisation_shortfall(self.ksp, self.comm) is None:
             return
+        fits = fits_freed(self.ksp, self.comm)
         self._drop_ksp()
-        if need > available + need / REFACTORISATION_MARGIN:  # its factors freed
+        if not fits:
             self.split = self._may_double = False
             self.fallbacks += 1
 
@@ -854,8 +856,7 @@ class Body:
         Returns: Whether the splits are now factorised in double precision.
         """
         self._may_double = False
-        need, available = refactorisation_memory(self.ksp, self.comm)
-        if available is not None and 2.0 * need > available + need / REFACTORISATION_MARGIN:
+        if not fits_freed(self.ksp, self.comm, 2.0):
             return False
         rtol = self.ksp.getTolerances()[0]
         self._drop_ksp()

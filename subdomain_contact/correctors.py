@@ -32,14 +32,13 @@ from subdomain_contact.body import Body
 from subdomain_contact.merged import Layout, MergePlan, RestrictedPlan, plan
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.solvers import (
-    REFACTORISATION_MARGIN,
     SWEEP_DIRECT,
     THERMOELECTRIC_MECHANICAL,
     destroy,
     factorise,
+    fits_freed,
     make_ksp,
     ordered,
-    refactorisation_memory,
     refactorisation_shortfall,
     refuse_refactorisation,
     sweepable,
@@ -360,9 +359,7 @@ class StripSolve:
         refactorisation margin), against the memory left plus what the sweep frees.
         Collective.
         """
-        need, available = refactorisation_memory(self.ksp, self.comm)
-        freed = need / REFACTORISATION_MARGIN
-        return available is None or WHOLE_OVER_SWEEP * need <= available + freed
+        return fits_freed(self.ksp, self.comm, WHOLE_OVER_SWEEP)
 
     def solve_whole(self, system: System) -> None:
         """Factorise this Jacobian's strip whole, in place of the sweep, until the next update.

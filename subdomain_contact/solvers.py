@@ -22,6 +22,7 @@ __all__ = [
     "available_memory",
     "destroy",
     "factorise",
+    "fits_freed",
     "make_ksp",
     "node_memory",
     "ordered",
@@ -364,6 +365,18 @@ def refactorisation_shortfall(ksp: PETSc.KSP, comm: MPI.Comm) -> str | None:
         f"its last factorisation, times {REFACTORISATION_MARGIN}) where {available / 1e9:.3g} "
         "GB is available"
     )
+
+
+def fits_freed(ksp: PETSc.KSP, comm: MPI.Comm, times: float = 1.0) -> bool:
+    """Whether ``times`` the memory of factorising ``ksp``'s matrix again fits, its factors freed.
+
+    The need is :func:`refactorisation_memory`'s; collective.
+
+    ``times``: the new factorisation against the last one (2 for double precision after
+    single, the whole strip against its sweep).
+    """
+    need, available = refactorisation_memory(ksp, comm)
+    return available is None or times * need <= available + need / REFACTORISATION_MARGIN
 
 
 def refuse_refactorisation(ksp: PETSc.KSP, comm: MPI.Comm, what: str, advice: str) -> None:

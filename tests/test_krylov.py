@@ -17,7 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import subdomain_contact as sc
-from subdomain_contact import correctors
+from subdomain_contact import correctors, solvers
 from subdomain_contact.correctors import dofs_within_layers
 from subdomain_contact.merged import merged_matrix
 from subdomain_contact.scene import gather_rows, match_points
@@ -241,10 +241,16 @@ def test_a_sweep_that_leaves_the_interface_krylov_short_is_replaced_by_the_whole
     solver.setup(system)  # the next Jacobian: swept again
     assert strip.swept and solver.strip.ksp.getPC().getType() == "fieldsplit"
     solver.destroy()
+
     # where the whole strip would not fit (the sweep's factors said to take 1 TB, 1 GB
     # left: INFO(22) of these bars is below MUMPS's 1 MB unit), the stall is said, and why
     # no fallback came, before any factorisation
-    monkeypatch.setattr(correctors, "refactorisation_memory", lambda ksp, comm: (1e12, 1e9))
+    def short(ksp, comm, times):
+        with monkeypatch.context() as patch:
+            patch.setattr(solvers, "refactorisation_memory", lambda ksp, comm: (1e12, 1e9))
+            return solvers.fits_freed(ksp, comm, times)
+
+    monkeypatch.setattr(correctors, "fits_freed", short)
     options.setValue("sc_strip_pc_fieldsplit_type", "additive")
     try:
         solver = sc.Subdomains(sc.SparseStrip(split=True), krylov=True, max_rounds=1)
