@@ -874,7 +874,9 @@ class Body:
         -5, at a state far from the solution: the row of four 3D blocks at 1.01M DOFs, a
         step that moved a field by 22 times its largest value), the body's matrix is
         factorised by MUMPS (options under ``-<prefix>direct_``) and solves by it until the
-        matrix changes; the next matrix tries the Krylov solve again.
+        matrix changes; the next matrix tries the Krylov solve again. Where MUMPS's analysis
+        says those factors would not fit in the node's memory left, a ``MemoryError`` says so
+        and what to try (:func:`~subdomain_contact.solvers.refuse_factorisation`).
         """
         b, x = self._vectors[0], self._vectors[1]
         b.array[:] = rhs
@@ -895,8 +897,13 @@ class Body:
                 f"body '{self.name}' ({kind} stopped with PETSc reason {reason} after "
                 f"{iterations} iterations; MUMPS instead)"
             )
+            advice = (
+                f"a larger Krylov budget (-{self.prefix}ksp_max_it, "
+                f"-{self.prefix}ksp_gmres_restart), shorter Newton steps (a smaller "
+                "max_temperature_step of sc.solve), or fewer ranks per node"
+            )
             self._direct = factorise(
-                self._A, self.prefix + "direct_", what, dim=self.dim, again=False
+                self._A, self.prefix + "direct_", what, dim=self.dim, again=False, advice=advice
             )
             self.factorisations += 1
             self.fallbacks += 1

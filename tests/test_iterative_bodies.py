@@ -702,6 +702,49 @@ def test_a_body_whose_krylov_solve_fails_is_factorised_instead(comm):
     assert max(errors) <= 1e-11
 
 
+def test_a_failed_krylov_solve_whose_factors_would_not_fit_is_refused_by_a_clear_error(
+    comm, monkeypatch
+):
+    """Where MUMPS's analysis says the factors that would take over a failed body Krylov solve
+    do not fit in the node's memory left, a MemoryError names the body, its Krylov failure,
+    the estimate and what to try, on every rank, before MUMPS allocates the factors (at 1.01M
+    DOFs they took the node to 0 GB available). The row of four 3D blocks with block 1
+    allowed 3 GMRES iterations, as above; the node given 1 byte less than MUMPS's estimate
+    for block 1 (the estimate weighed, not a 0 that any need exceeds), all it asks elsewhere."""
+    scene = blocks_row_scene(4, 0.05, comm=comm)
+    needs = []
+    estimate = solvers_module.factorisation_memory
+
+    def weighed(A, prefix, options):  # MUMPS's own estimate, recorded
+        needs.append(estimate(A, prefix, options))
+        return needs[-1]
+
+    monkeypatch.setattr(solvers_module, "factorisation_memory", weighed)
+    monkeypatch.setattr(
+        solvers_module, "available_memory", lambda: needs[-1] - 1.0 if needs else np.inf
+    )
+    options, key = PETSc.Options(), "sc_body_block_1_ksp_max_it"
+    options[key] = 3  # PETSc's global database: removed below, whatever happens
+    try:
+        with sc.System(squeezed_row(scene), solver="iterative") as system:
+            system.reset({"temperature": 300.0})
+            block = system.bodies.get("block_1")  # None on the rank without block 1
+            pattern = (
+                r"body 'block_1' \(GMRES \+ FIELDSPLIT stopped with PETSc reason -3 after 3 "
+                r"iterations; MUMPS instead\): its factorisation needs about .* GB on a node "
+                r"\(MUMPS's estimate after its analysis, INFO\(15\)\) where .* GB is "
+                r"available\. Try a larger Krylov budget \(-sc_body_block_1_ksp_max_it"
+            )
+            with pytest.raises(MemoryError, match=("" if block else "on another rank: ") + pattern):
+                sc.solve(system, sc.Subdomains(), rtol=1e-12)
+            if block is not None:  # refused before MUMPS made the factors
+                assert block._direct is None and block.fallbacks == 0
+                assert len(needs) == 1 and needs[0] > 0
+    finally:
+        options.delValue(key)
+    assert comm.allreduce(len(needs)) == 1  # block 1's alone: no other body fell back
+
+
 def test_an_open_contacts_master_is_solved_to_its_error_not_its_residual(comm):
     """The cathode slot as a 3D slice (22k DOFs), every body iterative, laws of pressure on
     contacts that open. A master of an open contact is held by its ties alone (1e-6 of the
