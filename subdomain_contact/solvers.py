@@ -398,10 +398,8 @@ def factorisation_memory(A: PETSc.Mat, prefix: str, options: Mapping[str, str]) 
     An analysis alone would serve as well, but petsc4py does not offer MatLUFactorSymbolic.
     Collective on ``A``'s communicator.
     """
-    ksp = make_ksp(A, prefix, options, setup=False)
-    pc = ksp.getPC()
-    pc.setFactorSetUpSolverType()
-    factor = pc.getFactorMatrix()
+    ksp = make_ksp(A, prefix, options, setup=False)  # its MUMPS factor matrix made
+    factor = ksp.getPC().getFactorMatrix()
     factor.setMumpsIcntl(23, 1)
     ksp.setUp()
     need = 1e6 * factor.getMumpsInfo(15)  # MUMPS's MB
