@@ -368,11 +368,14 @@ class _Callbacks:
     def _print(self, step: NewtonStep, relative: float) -> None:
         """One progress line (rank 0): the iterate, its residual relative to the scale."""
         fallbacks = _fallbacks(self.system)  # collective
+        inner = self.result.inner[-1] if step.iteration and self.result.inner else None
+        short = getattr(inner, "short_by", 0.0)  # the monolithic route's is None
         if self.system.comm.rank == 0:
             print(
                 f"Newton ({self.announce}) {step.iteration:3d}: max_f |F_f|/scale_f "
                 f"{relative:.2e}, inner rounds {step.inner_rounds}, step {step.step:.1e}"
                 + (f", halvings {step.halvings}" if step.halvings else "")
+                + (f", inner solve short by {short:.1f} times" if short else "")
                 + (f", body fallbacks {fallbacks}" if fallbacks else "")
                 + f", {time.perf_counter() - self.start:.0f} s",
                 flush=True,
