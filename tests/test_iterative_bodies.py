@@ -1,5 +1,7 @@
 """Bodies solved iteratively (Krylov + AMG per body) inside the subdomain iteration."""
 
+from contextlib import contextmanager
+
 import dolfinx.fem.petsc
 import numpy as np
 import pytest
@@ -332,6 +334,18 @@ def test_a_sweep_without_room_to_factorise_beside_its_factors_frees_them_or_turn
     assert max(errors) <= 1e-11
 
 
+@contextmanager
+def row_jacobian(comm, solver: str, linear: sc.Subdomains):
+    """The row of four 3D blocks (7k DOFs) at 300 K, its Jacobian assembled and ``linear``
+    set up on it, every body solved by ``solver``."""
+    with sc.System(squeezed_row(blocks_row_scene(4, 0.05, comm=comm)), solver=solver) as system:
+        system.reset({"temperature": 300.0})
+        system.apply_conditions()
+        system.assemble_jacobian()
+        linear.setup(system)
+        yield system
+
+
 def test_the_coarse_image_solves_each_body_once_per_mode_on_its_masters(comm):
     """``S Z`` of the coarse space from each body's rows of Z (``Subdomains._image``).
 
@@ -341,13 +355,8 @@ def test_the_coarse_image_solves_each_body_once_per_mode_on_its_masters(comm):
     the SVD of its rows of Z a body solves once per mode on its masters. The bodies are
     factorised but not condensed (``dense_limit=0``), so both products are exact to round-off.
     """
-    problem = squeezed_row(blocks_row_scene(4, 0.05, comm=comm))
-    with sc.System(problem, solver="direct") as system:
-        system.reset({"temperature": 300.0})
-        system.apply_conditions()
-        system.assemble_jacobian()
-        linear = sc.Subdomains(dense_limit=0)
-        linear.setup(system)
+    linear = sc.Subdomains(dense_limit=0)
+    with row_jacobian(comm, "direct", linear):
         Z = linear.coarse_basis
         before = linear._applications
         image = linear._image(Z)
@@ -371,13 +380,8 @@ def test_the_coarse_matrix_is_built_at_the_krylov_solves_loosest_body_tolerance(
     than the true rounds), whatever tolerance the last solve left (a true round's 1e-12
     made one build at 219k DOFs cost 3,349 body iterations against about 450); the true
     rounds' tolerance is set again after it."""
-    problem = squeezed_row(blocks_row_scene(4, 0.05, comm=comm))
-    with sc.System(problem, solver="iterative") as system:
-        system.reset({"temperature": 300.0})
-        system.apply_conditions()
-        system.assemble_jacobian()
-        linear = sc.Subdomains()
-        linear.setup(system)
+    linear = sc.Subdomains()
+    with row_jacobian(comm, "iterative", linear) as system:
         image, tight = linear._image, linear._body_rtol
 
         def build(left: float) -> list[float]:
@@ -794,14 +798,9 @@ def test_true_rounds_stalled_at_their_round_off_return_the_best_as_an_inexact_st
     best round (``short_by`` ≤ ``FLOOR_ACCEPTED``) after three rounds. ``floor`` = 30: the
     miss is past ``FLOOR_ACCEPTED``, and the solve fails as before, with its refinements.
     """
-    problem = squeezed_row(blocks_row_scene(4, 0.05, comm=comm))
     displacement = FIELDS.index("displacement")
-    with sc.System(problem, solver="iterative") as system:
-        system.reset({"temperature": 300.0})
-        system.apply_conditions()
-        system.assemble_jacobian()
-        linear = sc.Subdomains(max_refinements=3)
-        linear.setup(system)
+    linear = sc.Subdomains(max_refinements=3)
+    with row_jacobian(comm, "iterative", linear) as system:
         f = system.create_vector()
         system.residual(f)
         norms = system.field_norms(f)
