@@ -14,10 +14,10 @@ master increments are corrected.
   correction of a few unknowns per body (its constants for T and φ, its rigid motions for
   u), as in balancing domain decomposition (Mandel 1993). ``S^α`` is applied as a dense
   matrix where the body's factorisation gives it cheaply or where the body has few master
-  DOFs, else by one homogeneous body solve. A round
-  of body solves then checks the true residual, and refines if round-off left it short; inside
-Newton, where refinements stop gaining on the round-off of iterative body solves, the best
-round is an inexact Newton step (:data:`FLOOR_ACCEPTED`).
+  DOFs, else by one homogeneous body solve. A round of body solves then checks the true
+  residual, and refines if round-off left it short; inside Newton, where the refinements stop
+  gaining on the round-off of the body solves, its best round is an inexact Newton step
+  (:data:`FLOOR_ACCEPTED`).
 
 The solve stops when every interface's master residual is below ``rtol`` times its flux scale
 (per channel: what its bodies push into it at the first round), or, inside Newton, when each
