@@ -465,16 +465,20 @@ class Subdomains:
 
     def _measure(
         self, residual: dict[str, Vector], scales: dict[str, Vector], tolerance: Tolerance
-    ) -> tuple[float, bool]:
-        """Largest residual relative to its channel's scale; and whether it is small enough."""
+    ) -> tuple[float, bool, float]:
+        """Largest residual relative to its channel's scale; whether it is small enough.
+
+        And, against absolute tolerances, the largest field's residual over its own (else inf).
+        """
         relative = 0.0
         for k, r in residual.items():
             norms = self._channel_norms(k, r)
             relative = max(relative, float(np.max(norms / scales[k], initial=0.0)))
         if tolerance.atol is None:
-            return relative, relative <= tolerance.rtol
-        norms = self.system.master_field_norms(residual)
-        return relative, all(norms[f] <= tolerance.atol[f] for f in norms)
+            return relative, relative <= tolerance.rtol, np.inf
+        norms, atol = self.system.master_field_norms(residual), tolerance.atol
+        miss = max(norms[f] / max(atol[f], 1e-300) for f in norms)
+        return relative, all(norms[f] <= atol[f] for f in norms), miss
 
     def _weighed(self, residual: dict[str, Vector]) -> dict[str, Vector]:
         """Each master's residual times its error weight, if any (:meth:`_error_weights`)."""
@@ -530,7 +534,7 @@ class Subdomains:
         for rounds in range(1, self.max_rounds + 1):
             y, residual, pushed = self._round(b, increments)
             scales = scales or self._flux_scales(pushed)
-            relative, small = self._measure(residual, scales, tolerance)
+            relative, small, _ = self._measure(residual, scales, tolerance)
             result.rounds, result.converged = rounds, small
             result.history.append(relative)
             if self.monitor is not None:
@@ -793,13 +797,13 @@ class Subdomains:
             y, residual, pushed = self._round(b, increments)
             scales = scales or self._flux_scales(pushed)
             measured = self._weighed(residual)
-            relative, small = self._measure(measured, scales, tolerance)
+            previous = miss
+            relative, small, miss = self._measure(measured, scales, tolerance)
             result.rounds, result.converged = result.rounds + 1, small
             result.history.append(relative)
             if small:
                 result.applications = self._applications
                 return y
-            previous, miss = miss, self._miss(measured, tolerance)
             best = min(best, (miss, y), key=lambda pair: pair[0])
             # the last two refinements' Krylov solves converged and their true rounds missed,
             # the second without halving the first's miss: the body solves' round-off
@@ -846,13 +850,6 @@ class Subdomains:
             f"{self.max_refinements} refinements{floor}",
             result,
         )
-
-    def _miss(self, measured: dict[str, Vector], tolerance: Tolerance) -> float:
-        """The largest field's master residual over its absolute tolerance (inf without)."""
-        if tolerance.atol is None:
-            return np.inf
-        norms = self.system.master_field_norms(measured)
-        return max(norms[f] / max(tolerance.atol[f], 1e-300) for f in norms)
 
     def _weights(self, scales: dict[str, Vector], tolerance: Tolerance, symmetric: bool):
         """1 / tolerance of every master DOF, so that ``‖W r‖₂ ≤ 1`` meets every check.
