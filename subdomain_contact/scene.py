@@ -36,7 +36,7 @@ __all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_poi
 
 #: A rank whose load (its bodies' cells, each over the ranks of its group) exceeds the mean
 #: load of the ranks by more than this factor, with a body on it that may be solved iteratively,
-#: makes :func:`load_scene` spread every body over all ranks instead (``"auto"``). A body
+#: makes a scene placed ``"auto"`` spread every body over all ranks instead. A body
 #: solved by Krylov + AMG spreads well, and alone on its ranks it leaves the others waiting
 #: in its collective calls (``gdb``: the collector bar slot at 1.07M DOFs, 2 ranks, the
 #: block of 794k DOFs on one, the bar and cast iron on the other). The factor is the inverse
@@ -130,28 +130,114 @@ class Interface:
 
 
 @dataclass(frozen=True)
-class Scene:
-    """Bodies and contact interfaces read from one ``.geo`` file.
+class Placement:
+    """Where a scene's bodies are solved.
 
     Attributes:
-        source: The ``.geo`` file.
-        comm: Communicator of the whole scene.
-        bodies: Every body; those of other rank groups as serial copies (names, boundaries).
-        interfaces: Every interface.
         owner: Body name -> index of the rank group that solves it.
         group: This rank's group index.
         group_comm: Communicator of this rank's group.
-        group_roots: Rank (in ``comm``) of each group's first rank.
+        group_roots: Rank (in the scene's communicator) of each group's first rank.
     """
 
-    source: Path
-    comm: MPI.Comm
-    bodies: Mapping[str, Body]
-    interfaces: Mapping[str, Interface]
     owner: Mapping[str, int]
     group: int
     group_comm: MPI.Comm
     group_roots: tuple[int, ...]
+
+
+class Scene:
+    """Bodies and contact interfaces read from one ``.geo`` file.
+
+    A scene on rank groups is placed when it is first asked where a body is solved: by the
+    first :class:`~subdomain_contact.system.System` built on it, which knows how each body is
+    solved (:meth:`place`), or else by its bodies' sizes.
+
+    Attributes:
+        source: The ``.geo`` file.
+        comm: Communicator of the whole scene.
+        bodies: Every body; those of other rank groups (every body until the scene is
+            placed) as serial copies (names, boundaries).
+        interfaces: Every interface.
+    """
+
+    def __init__(
+        self,
+        source: Path,
+        comm: MPI.Comm,
+        bodies: Mapping[str, Body],
+        interfaces: Mapping[str, Interface],
+        placement: Placement | None,
+        *,
+        spread: bool = False,
+    ) -> None:
+        """``placement`` None: placed on rank groups later (``spread``: :func:`_place`'s)."""
+        self.source, self.comm = source, comm
+        self.bodies, self.interfaces = bodies, interfaces
+        self._placement, self._spread = placement, spread
+
+    @property
+    def placed(self) -> bool:
+        """Whether the bodies have their rank groups."""
+        return self._placement is not None
+
+    def place(self, solvers: Mapping[str, str] | None = None) -> None:
+        """Place the bodies on rank groups and distribute each over its group; once.
+
+        ``solvers``: each body's solver (:data:`~subdomain_contact.body.SOLVERS`), which
+        :func:`_place` balances kind by kind; None: by the bodies' sizes alone. A placed
+        scene is left as it is.
+        """
+        if self._placement is not None:
+            return
+        cells = {
+            n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
+            for n, b in self.bodies.items()
+        }
+        if solvers is None:  # a body that some problem (T, φ and u: dim + 2 a node) iterates
+            most = self.dim + 2
+            iterative = {n for n, b in self.bodies.items() if iterative_by_size(b.mesh, most)}
+        else:
+            iterative = {n for n, s in solvers.items() if s != "direct"}
+        work = None if iterative else _work(self)  # an iterative body is not condensed
+        self._put(
+            *_place(cells, work, self.comm.size, iterative if self._spread else set(), solvers)
+        )
+
+    def _put(self, owner: Mapping[str, int], group_of_rank: Sequence[int]) -> None:
+        """Distribute each body over its group's ranks (body -> group, rank -> group)."""
+        group = group_of_rank[self.comm.rank]
+        group_comm = self.comm.Split(group, self.comm.rank)
+        roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
+        self.bodies = {
+            name: _distribute(body, group_comm) if owner[name] == group else body
+            for name, body in self.bodies.items()
+        }
+        self._placement = Placement(dict(owner), group, group_comm, roots)
+
+    @property
+    def owner(self) -> Mapping[str, int]:
+        """Body name -> index of the rank group that solves it."""
+        self.place()
+        return self._placement.owner
+
+    @property
+    def group(self) -> int:
+        """This rank's group index."""
+        self.place()
+        return self._placement.group
+
+    @property
+    def group_comm(self) -> MPI.Comm:
+        """Communicator of this rank's group."""
+        self.place()
+        return self._placement.group_comm
+
+    @property
+    def group_roots(self) -> tuple[int, ...]:
+        """Rank (in :attr:`comm`) of each group's first rank."""
+        self.place()
+        return self._placement.group_roots
 
     @property
     def dim(self) -> int:
@@ -229,12 +315,15 @@ def load_scene(
         placement: ``"shared"``: every body spread over all ranks of ``comm``.
             ``"groups"``: ranks split into groups, each body solved by one group (one body
             per group when there are enough ranks, in proportion to their cells; several
-            bodies per rank otherwise). Every rank meshes the file and keeps the master
-            layers; a group distributes only its own bodies. ``"auto"`` (default):
-            ``"groups"`` with several bodies on several ranks, else ``"shared"``; with every
-            body spread over all ranks (one group) where a body that may be solved
-            iteratively (:func:`iterative_by_size` with T, φ and u) would leave a rank more
-            than :data:`SPREAD_LOAD` times the mean load. A scene
+            bodies per rank otherwise, each kind of body solver shared out among the ranks).
+            Every rank meshes the file and keeps the master layers; a group distributes only
+            its own bodies, when the groups are chosen: by the first ``System`` built on the
+            scene, which knows each body's solver (:meth:`Scene.place`), or when the scene is
+            first asked where a body is solved. ``"auto"`` (default): ``"groups"`` with
+            several bodies on several ranks, else ``"shared"``; with every body spread over
+            all ranks (one group) where a body solved iteratively (or, placed before a
+            ``System``, one that may be: :func:`iterative_by_size` with T, φ and u) would
+            leave a rank more than :data:`SPREAD_LOAD` times the mean load. A scene
             of the same bodies (on ``comm``): its rank groups, so that a state interpolates
             between the two (a coarser mesh of a nested iteration, ``System.interpolate``).
         mesh_cache: A directory where the mesh gmsh makes is kept as a ``.msh`` file, named
@@ -313,40 +402,21 @@ def load_scene(
         body_of_cell,
     )  # fmt: skip
     owner = dict.fromkeys(scene_bodies, 0)
-    return Scene(path, comm, scene_bodies, scene_interfaces, owner, 0, comm, (0,))
+    return Scene(path, comm, scene_bodies, scene_interfaces, Placement(owner, 0, comm, (0,)))
 
 
 def _grouped(
     serial: Scene, comm: MPI.Comm, like: Scene | None = None, *, spread: bool = False
 ) -> Scene:
-    """Place the bodies of a serial scene (on every rank) on ``like``'s rank groups, or new.
+    """The bodies of a serial scene (on every rank) on ``like``'s rank groups, or unplaced.
 
-    ``spread``: one group of every rank where :func:`_place` finds that it balances better.
+    Unplaced, :meth:`Scene.place` chooses the groups later (``spread``: one group of every
+    rank where :func:`_place` finds that it balances better).
     """
+    scene = Scene(serial.source, comm, serial.bodies, serial.interfaces, None, spread=spread)
     if like is not None:
-        owner, group_of_rank = dict(like.owner), comm.allgather(like.group)
-    else:
-        cells = {
-            n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
-            for n, b in serial.bodies.items()
-        }
-        # a body that some problem (T, φ and u: dim + 2 unknowns per node) solves iteratively
-        most = serial.dim + 2
-        iterative = (
-            {n for n, b in serial.bodies.items() if iterative_by_size(b.mesh, most)}
-            if spread
-            else set()
-        )
-        work = None if iterative else _work(serial)  # an iterative body is not condensed
-        owner, group_of_rank = _place(cells, work, comm.size, iterative)
-    group = group_of_rank[comm.rank]
-    group_comm = comm.Split(group, comm.rank)
-    roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
-    bodies = {
-        name: _distribute(body, group_comm) if owner[name] == group else body
-        for name, body in serial.bodies.items()
-    }
-    return Scene(serial.source, comm, bodies, serial.interfaces, owner, group, group_comm, roots)
+        scene._put(like.owner, comm.allgather(like.group))
+    return scene
 
 
 def _work(scene: Scene) -> dict[str, float] | None:
@@ -374,6 +444,7 @@ def _place(
     work: dict[str, float] | None,
     ranks: int,
     iterative: AbstractSet[str] = frozenset(),
+    solvers: Mapping[str, str] | None = None,
 ) -> tuple[dict[str, int], list[int]]:
     """Body -> group, and rank -> group; one group of every rank where that balances better.
 
@@ -388,6 +459,16 @@ def _place(
     12.6 s); by work 9.4 s. Where some bodies are not condensed, the work of their strip
     corrector is not in the estimate: 8 steps of the preheat's small 3D quarter took 13.1 s
     packed by the estimate and 11.1 s by cells.
+
+    Bodies of several ``solvers`` (body -> :data:`~subdomain_contact.body.SOLVERS`): each,
+    largest first, onto the rank whose largest share of a kind's load is the least with the
+    body on it (then the least load; one kind: as above), so that a Jacobian's
+    factorisations and the interface solves' Krylov body solves each keep every rank at
+    work where the kinds weigh alike, and a light kind does not join the heaviest rank.
+    Measured, the row of
+    four 3D blocks at 1.01M DOFs, 2 ranks, the held end blocks by the sweep and the floating
+    inner two by AMG (py-spy: each rank waited for the other 27 % of the time, in turn):
+    the two AMG blocks on one rank 1,973.8 s, one block of each kind a rank 1,719.6 s.
     """
     if ranks >= len(cells):
         names = sorted(cells, key=lambda n: -cells[n])
@@ -401,11 +482,21 @@ def _place(
         total = sum(cells.values())
     else:
         weight = cells if work is None else work
-        load = [0.0] * ranks
+        kind = dict.fromkeys(weight, "") | dict(solvers or {})
+        heft = {k: sum(w for n, w in weight.items() if kind[n] == k) for k in kind.values()}
+        load, shares = [0.0] * ranks, [dict.fromkeys(heft, 0.0) for _ in range(ranks)]
         owner = {}
+
+        def fullest(rank: int, name: str) -> float:
+            """The rank's largest share of a kind with the body on it (12 digits: ties)."""
+            share = dict(shares[rank])
+            share[kind[name]] += weight[name] / heft[kind[name]]
+            return round(max(share.values()), 12)
+
         for name in sorted(weight, key=lambda n: -weight[n]):
-            owner[name] = int(np.argmin(load))
+            owner[name] = min(range(ranks), key=lambda r: (fullest(r, name), load[r]))
             load[owner[name]] += weight[name]
+            shares[owner[name]][kind[name]] += weight[name] / heft[kind[name]]
         group_of_rank, total = list(range(ranks)), sum(weight.values())
     holding = {owner[n] for n in iterative}  # groups with a body that may be iterative
     waiting = [load[r] for r, g in enumerate(group_of_rank) if g in holding]

@@ -145,6 +145,11 @@ class System:
             raise ValueError(f"solver='{solver}': give 'auto' or one of {', '.join(SOLVERS)}")
         scene = problem.scene
         self.problem, self.comm, self.prefix = problem, scene.comm, prefix
+        solvers = {  # the same on every rank (a bad option raises on each)
+            name: _solver(problem, body, solver, f"{prefix}body_{name}_")
+            for name, body in scene.bodies.items()
+        }
+        scene.place(solvers)  # a scene not yet placed: by its bodies' solvers
         gc.collect()  # what earlier systems left: petsc4py hands it to PETSc's garbage,
         for name, body in scene.bodies.items():  # destroyed here, collectively on each comm
             if scene.is_local(name):
@@ -164,9 +169,8 @@ class System:
                 try:  # bad data is refused on every rank of the body: tell the other groups
                     at = f"{prefix}body_{name}_"
                     self.bodies[name] = Body(
-                        problem, body, mine, prefix=at, schur=schur,
-                        solver=_solver(problem, body, solver, at),
-                    )  # fmt: skip
+                        problem, body, mine, prefix=at, schur=schur, solver=solvers[name]
+                    )
                 except ValueError as error:
                     failure = error
                     break

@@ -234,6 +234,35 @@ def test_a_rank_kept_waiting_by_an_iterative_body_makes_every_body_spread():
     assert _place(row, None, 4, set(row)) == ({n: i for i, n in enumerate(row)}, [0, 1, 2, 3])
 
 
+def test_bodies_of_two_solvers_are_packed_kind_by_kind():
+    """Fewer ranks than bodies, solved two ways: each kind's bodies shared out among the
+    ranks (each rank then works in a Jacobian's factorisations and in the interface solves).
+
+    Four blocks in a row of decreasing cells: packed by cells alone (largest first onto the
+    lightest rank) the ends share rank 0 and the inner two rank 1; with the ends by the
+    sweep and the inner two by AMG (the row of 3D blocks, ``system._anchored``) each rank
+    holds one of each. One kind packs as by cells alone. The collector bar slot's block by
+    the sweep, its cast iron and bar factorised (cells as above): the light kind stays off
+    the block's rank, as by cells.
+    """
+    from subdomain_contact.scene import _place
+
+    row = {"block_0": 1040, "block_1": 1030, "block_2": 1020, "block_3": 1010}
+    by_cells = {"block_0": 0, "block_1": 1, "block_2": 1, "block_3": 0}
+    assert _place(row, None, 2) == (by_cells, [0, 1])
+    assert _place(row, None, 2, solvers=dict.fromkeys(row, "split")) == (by_cells, [0, 1])
+    kinds = {"block_0": "split", "block_1": "iterative", "block_2": "iterative"}
+    kinds["block_3"] = "split"
+    owner, ranks = _place(row, None, 2, set(row), kinds)
+    assert ranks == [0, 1]
+    for kind in ("split", "iterative"):
+        assert sorted(owner[n] for n in row if kinds[n] == kind) == [0, 1]
+    slot = {"block": 15660, "cast_iron": 2586, "bar": 3338}
+    kinds = {"block": "split", "cast_iron": "direct", "bar": "direct"}
+    assert _place(slot, None, 2, set(), kinds) == _place(slot, None, 2)
+    assert _place(slot, None, 2)[0]["block"] != _place(slot, None, 2)[0]["bar"]
+
+
 def test_bodies_spread_for_an_iterative_body_give_the_serial_solution(comm, monkeypatch):
     """``placement="auto"`` spreads every body where a body that may be solved iteratively
     would keep the other ranks waiting; ``"groups"`` is kept as asked. The 3D cathode slot
@@ -246,10 +275,10 @@ def test_bodies_spread_for_an_iterative_body_give_the_serial_solution(comm, monk
     monkeypatch.setattr(scene_module, "SPREAD_LOAD", 1.2)
     scene = cathode_slot_scene(0.06, 0.03, depth=0.04, comm=comm)
     grouped = cathode_slot_scene(0.06, 0.03, depth=0.04, comm=comm, placement="groups")
-    monkeypatch.undo()  # the bodies' own solvers by the default rule: factorised
-    assert scene.shared and scene.group_comm.size == comm.size
+    assert scene.shared and scene.group_comm.size == comm.size  # placed when first asked
     assert all(scene.is_local(name) for name in scene.bodies)
     assert len(grouped.group_roots) == min(comm.size, 3)
+    monkeypatch.undo()  # the bodies' own solvers by the default rule: factorised
 
     def solve(scene):
         system = make_system(cathode_slot(scene, mechanics=False))

@@ -167,6 +167,8 @@ def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
     with sc.System(squeezed_row(row)) as system:  # the inner blocks held along x by contacts
         for name, body in system.bodies.items():
             assert body.iterative and body.split == (name in ("block_0", "block_3"))
+    for kind in (("block_0", "block_3"), ("block_1", "block_2")):  # placed kind by kind
+        assert len({row.owner[name] for name in kind}) == min(comm.size, 2)
     with pytest.raises(ValueError, match=r"body 'block_[AB]'.* needs T or φ, and u"):
         sc.System(heated_blocks(blocks), solver="split")
     plates = two_plates_scene(64, 64, comm=comm)  # 2D, 4.2k DOFs per plate
