@@ -151,7 +151,8 @@ class Scene:
 
     A scene on rank groups is placed when it is first asked where a body is solved: by the
     first :class:`~subdomain_contact.system.System` built on it, which knows how each body is
-    solved (:meth:`place`), or else by its bodies' sizes.
+    solved (:meth:`place`), or else by its bodies' sizes; placing is collective on
+    :attr:`comm`, so every rank asks (every rank builds the ``System``).
 
     Attributes:
         source: The ``.geo`` file.
@@ -182,7 +183,7 @@ class Scene:
         return self._placement is not None
 
     def place(self, solvers: Mapping[str, str] | None = None) -> None:
-        """Place the bodies on rank groups and distribute each over its group; once.
+        """Place the bodies on rank groups and distribute each over its group; once, collective.
 
         ``solvers``: each body's solver (:data:`~subdomain_contact.body.SOLVERS`), which
         :func:`_place` balances kind by kind; None: by the bodies' sizes alone. A placed
