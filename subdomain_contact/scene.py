@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 from pathlib import Path
@@ -171,26 +171,38 @@ class Scene:
         placement: Placement | None,
         *,
         spread: bool = False,
+        like: Scene | None = None,
     ) -> None:
-        """``placement`` None: placed on rank groups later (``spread``: :func:`_place`'s)."""
+        """A scene; ``placement`` None: placed on rank groups later (:meth:`place`).
+
+        ``like``: a scene whose groups it takes; ``spread``: :func:`_place` may spread.
+        """
         self.source, self.comm = source, comm
         self.bodies, self.interfaces = bodies, interfaces
-        self._placement, self._spread = placement, spread
+        self._placement, self._spread, self._like = placement, spread, like
 
     @property
     def placed(self) -> bool:
         """Whether the bodies have their rank groups."""
         return self._placement is not None
 
-    def place(self, solvers: Mapping[str, str] | None = None) -> None:
+    def place(self, solver_of: Callable[[Body], str] | None = None) -> None:
         """Place the bodies on rank groups and distribute each over its group; once, collective.
 
-        ``solvers``: each body's solver (:data:`~subdomain_contact.body.SOLVERS`), which
-        :func:`_place` balances kind by kind; None: by the bodies' sizes alone. A placed
-        scene is left as it is.
+        ``solver_of``: a body's solver (:data:`~subdomain_contact.body.SOLVERS`), which
+        :func:`_place` balances kind by kind; None: by the bodies' sizes alone. A scene
+        loaded like another takes its groups, that scene placed first by its own bodies'
+        solvers (the finer mesh of a nested iteration). A placed scene is left as it is.
         """
         if self._placement is not None:
             return
+        if self._like is not None:
+            self._like.place(solver_of)
+            self._put(self._like.owner, self.comm.allgather(self._like.group))
+            return
+        solvers = None
+        if solver_of is not None:
+            solvers = {name: solver_of(body) for name, body in self.bodies.items()}
         cells = {
             n: b.mesh.topology.index_map(b.mesh.topology.dim).size_global
             for n, b in self.bodies.items()
@@ -207,6 +219,7 @@ class Scene:
 
     def _put(self, owner: Mapping[str, int], group_of_rank: Sequence[int]) -> None:
         """Distribute each body over its group's ranks (body -> group, rank -> group)."""
+        self._like = None
         group = group_of_rank[self.comm.rank]
         group_comm = self.comm.Split(group, self.comm.rank)
         roots = tuple(group_of_rank.index(g) for g in range(max(group_of_rank) + 1))
@@ -326,7 +339,9 @@ def load_scene(
             ``System``, one that may be: :func:`iterative_by_size` with T, φ and u) would
             leave a rank more than :data:`SPREAD_LOAD` times the mean load. A scene
             of the same bodies (on ``comm``): its rank groups, so that a state interpolates
-            between the two (a coarser mesh of a nested iteration, ``System.interpolate``).
+            between the two (a coarser mesh of a nested iteration, ``System.interpolate``);
+            where that scene is not placed yet, both are placed when the first ``System``
+            on either is built, by the solvers of that scene's bodies.
         mesh_cache: A directory where the mesh gmsh makes is kept as a ``.msh`` file, named
             by a hash of the ``.geo`` text, the parameters and gmsh's version, and read
             back instead of meshing again (two 3D blocks at 939,678 DOFs: a load took
@@ -346,12 +361,12 @@ def load_scene(
     like = placement if isinstance(placement, Scene) else None
     auto = placement == "auto"
     if like is not None:
-        if set(like.owner) != set(bodies):
+        if set(like.bodies) != set(bodies):
             raise ValueError(
-                f"{path}: placed like a scene of other bodies ({sorted(like.owner)}, "
+                f"{path}: placed like a scene of other bodies ({sorted(like.bodies)}, "
                 f"not {sorted(bodies)})"
             )
-        placement = "shared" if like.shared else "groups"
+        placement = "shared" if like.placed and like.shared else "groups"
     elif placement == "auto":
         placement = "groups" if len(bodies) > 1 else "shared"
     if placement == "groups" and comm.size > 1:
@@ -409,14 +424,16 @@ def load_scene(
 def _grouped(
     serial: Scene, comm: MPI.Comm, like: Scene | None = None, *, spread: bool = False
 ) -> Scene:
-    """The bodies of a serial scene (on every rank) on ``like``'s rank groups, or unplaced.
+    """The bodies of a serial scene (on every rank), placed later by :meth:`Scene.place`.
 
-    Unplaced, :meth:`Scene.place` chooses the groups later (``spread``: one group of every
-    rank where :func:`_place` finds that it balances better).
+    ``like``: its rank groups (now if it is placed); else :func:`_place`'s (``spread``: one
+    group of every rank where it finds that that balances better).
     """
-    scene = Scene(serial.source, comm, serial.bodies, serial.interfaces, None, spread=spread)
-    if like is not None:
-        scene._put(like.owner, comm.allgather(like.group))
+    scene = Scene(
+        serial.source, comm, serial.bodies, serial.interfaces, None, spread=spread, like=like
+    )
+    if like is not None and like.placed:
+        scene.place()
     return scene
 
 

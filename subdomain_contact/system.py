@@ -145,11 +145,12 @@ class System:
             raise ValueError(f"solver='{solver}': give 'auto' or one of {', '.join(SOLVERS)}")
         scene = problem.scene
         self.problem, self.comm, self.prefix = problem, scene.comm, prefix
-        solvers = {  # the same on every rank (a bad option raises on each)
-            name: _solver(problem, body, solver, f"{prefix}body_{name}_")
-            for name, body in scene.bodies.items()
-        }
-        scene.place(solvers)  # a scene not yet placed: by its bodies' solvers
+
+        def solver_of(body) -> str:  # the same on every rank (a bad option raises on each)
+            return _solver(problem, body, solver, f"{prefix}body_{body.name}_")
+
+        scene.place(solver_of)  # a scene not yet placed: by its bodies' solvers
+        solvers = {name: solver_of(body) for name, body in scene.bodies.items()}
         gc.collect()  # what earlier systems left: petsc4py hands it to PETSc's garbage,
         for name, body in scene.bodies.items():  # destroyed here, collectively on each comm
             if scene.is_local(name):
