@@ -483,10 +483,10 @@ def _place(
     body on it (then the least load; one kind: as above), so that a Jacobian's
     factorisations and the interface solves' Krylov body solves each keep every rank at
     work where the kinds weigh alike, and a light kind does not join the heaviest rank.
-    Measured, the row of
-    four 3D blocks at 1.01M DOFs, 2 ranks, the held end blocks by the sweep and the floating
-    inner two by AMG (py-spy: each rank waited for the other 27 % of the time, in turn):
-    the two AMG blocks on one rank 1,973.8 s, one block of each kind a rank 1,719.6 s.
+    Measured, the row of four 3D blocks at 1.01M DOFs, 2 ranks, the held end blocks by the
+    sweep and the floating inner two by AMG (py-spy: each rank waited for the other 27 % of
+    the time, in turn): the two AMG blocks on one rank 1,973.8 s and 8.76 GiB, one block of
+    each kind a rank 1,760.6 s and 6.46 GiB.
     """
     if ranks >= len(cells):
         names = sorted(cells, key=lambda n: -cells[n])

@@ -251,8 +251,7 @@ def test_bodies_of_two_solvers_are_packed_kind_by_kind():
     by_cells = {"block_0": 0, "block_1": 1, "block_2": 1, "block_3": 0}
     assert _place(row, None, 2) == (by_cells, [0, 1])
     assert _place(row, None, 2, solvers=dict.fromkeys(row, "split")) == (by_cells, [0, 1])
-    kinds = {"block_0": "split", "block_1": "iterative", "block_2": "iterative"}
-    kinds["block_3"] = "split"
+    kinds = dict.fromkeys(row, "iterative") | {"block_0": "split", "block_3": "split"}
     owner, ranks = _place(row, None, 2, set(row), kinds)
     assert ranks == [0, 1]
     for kind in ("split", "iterative"):
