@@ -48,26 +48,35 @@ def relative_nodal_error(
 class NodalReference:
     """A reference solution that any distribution of the same meshes can be compared with.
 
-    Every rank keeps every body's node coordinates and values (gathered once), so a scene
-    loaded with another placement, or on other ranks, finds its reference values by
-    coordinates.
+    Every rank keeps every body's node coordinates and values (gathered once over ``comm``),
+    so a scene loaded with another placement, or on other ranks (bodies on other rank
+    groups), finds its reference values by coordinates.
 
     Args:
-        spaces: Body name -> P1 space of the reference.
+        spaces: Body name -> P1 space of the reference (the bodies on this rank).
         values: Body name -> owned nodal values of the reference.
+        comm: Every rank that holds some body (collective).
     """
 
     def __init__(
-        self, spaces: Mapping[str, dolfinx.fem.FunctionSpace], values: Mapping[str, Values]
+        self,
+        spaces: Mapping[str, dolfinx.fem.FunctionSpace],
+        values: Mapping[str, Values],
+        comm: MPI.Comm = MPI.COMM_WORLD,
     ) -> None:
-        self.nodes, self.trees, self.values = {}, {}, {}
+        owned = {}
         for name, V in spaces.items():
             n = V.dofmap.index_map.size_local
-            comm = V.mesh.comm
-            points = np.concatenate(comm.allgather(V.tabulate_dof_coordinates()[:n]))
-            self.values[name] = np.concatenate(comm.allgather(np.asarray(values[name])[:n]))
-            self.trees[name] = cKDTree(points)
-            self.nodes[name] = points
+            owned[name] = (V.tabulate_dof_coordinates()[:n], np.asarray(values[name])[:n])
+        parts: dict[str, list] = {}
+        for held in comm.allgather(owned):  # a serial copy on several ranks: repeated nodes
+            for name, pair in held.items():
+                parts.setdefault(name, []).append(pair)
+        self.nodes, self.trees, self.values = {}, {}, {}
+        for name, pairs in parts.items():
+            self.nodes[name] = np.concatenate([points for points, _ in pairs])
+            self.values[name] = np.concatenate([v for _, v in pairs])
+            self.trees[name] = cKDTree(self.nodes[name])
 
     def save(self, path) -> None:
         """Write the gathered nodes and values (``.npz``) for another run to compare with."""
