@@ -49,7 +49,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.masters import MasterLayer, SlaveMap, contact_dofs, slave_map
-from subdomain_contact.modes import centre, modes, span
+from subdomain_contact.modes import Mode, centre, modes, span
 from subdomain_contact.physics import BodyForms, Problem, body_forms
 from subdomain_contact.scene import Body as SceneBody
 from subdomain_contact.schur import CondensedFactor, condensation
@@ -176,6 +176,11 @@ COLUMN_BYTES = 64 * 2**20
 #: near the bulk moved the row of four blocks' inner rounds between rank groups and serial
 #: (3 against 2 at one step).
 WEAK_LINK = 1e-2
+
+#: A mode solves a body (:meth:`Body.respond_by`) where its residual is at most this much
+#: of each field's scale (``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞``): the 1e3 eps a factorised solve
+#: reaches (:meth:`Body._polluted`), so the product is as exact as a direct solve.
+KERNEL_RESIDUAL = 1e3 * np.finfo(float).eps
 
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
@@ -736,12 +741,7 @@ class Body:
         vectors: list[PETSc.Vec] = []
         for mode in modes(fields, dim):
             v = self.A_bulk.createVecRight()
-            for name in fields:
-                for c in range(dim) if name == "displacement" else [None]:
-                    V, parent_of = self.forms.collapsed(name, c)
-                    owned = V.dofmap.index_map.size_local
-                    x = V.tabulate_dof_coordinates()[:owned] - middle
-                    v.array[parent_of[:owned]] = mode(name, c, x)
+            v.array[:] = self.mode_values(mode, middle)
             vectors.append(v)
         space = span(vectors, self.comm)
         self._near_null = [space]
@@ -874,7 +874,9 @@ class Body:
         -5, at a state far from the solution: the row of four 3D blocks at 1.01M DOFs, a
         step that moved a field by 22 times its largest value), the body's matrix is
         factorised by MUMPS (options under ``-<prefix>direct_``) and solves by it until the
-        matrix changes; the next matrix tries the Krylov solve again. Where MUMPS's analysis
+        matrix changes; the next matrix tries the Krylov solve again. A sweep still in single
+        precision is first factorised again in double (:meth:`_sweep_in_double`), as a short
+        one is, and solves again. Where MUMPS's analysis
         says those factors would not fit in the node's memory left, a ``MemoryError`` says so
         and what to try (:func:`~subdomain_contact.solvers.refuse_factorisation`).
         """
@@ -891,6 +893,11 @@ class Body:
             self.ksp.setTolerances(rtol=kept)
         reason, iterations = self.ksp.getConvergedReason(), self.ksp.getIterationNumber()
         self.solve_iterations += iterations if self.iterative else 0
+        if reason < 0 and self.iterative and self._may_double and self._sweep_in_double():
+            # a sweep in single precision that stagnates is doubled before MUMPS takes the
+            # body whole (the row at 18,495 DOFs: block 0's GMRES broke down at its restart
+            # of 100 iterations, stuck at 4e-5 of its start, on a coarse column at step 12)
+            return self._krylov(rhs, rtol)
         if reason < 0 and self.iterative:
             kind = f"{self.ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
             what = (
@@ -1026,6 +1033,43 @@ class Body:
             return self._master_residuals(lambda at: -(self.sigma[at] @ y_s), y_s, masters)
         y_s, Ay_s = self._solve_columns(rhs_s)
         return self._master_residuals(lambda at: -Ay_s[at], y_s, masters)
+
+    def mode_values(self, mode: Mode, middle: npt.NDArray[np.float64]) -> Vector:
+        """A kernel mode (:func:`~subdomain_contact.modes.modes`) on the owned DOFs.
+
+        Rotations are about ``middle`` [m].
+        """
+        fields, dim = self.forms.fields, self.forms.W.mesh.geometry.dim
+        out = np.zeros(self.size)
+        for name in fields:
+            for c in range(dim) if name == "displacement" else [None]:
+                V, parent_of = self.forms.collapsed(name, c)
+                owned = V.dofmap.index_map.size_local
+                x = V.tabulate_dof_coordinates()[:owned] - middle
+                out[parent_of[:owned]] = mode(name, c, x)
+        return out
+
+    def respond_by(self, y: Vector, masters: dict[str, Vector]) -> dict[str, Vector] | None:
+        """``S^α`` of master values that ``y`` (owned DOFs) solves the body for, without a solve.
+
+        A body's own constant or rigid motion, its trace on the masters, solves the body
+        where the body's conditions and laws do not see it (a floating body's translation):
+        its response is then the master residuals at ``y``, a product, where a solve would
+        compute it as the small difference of two large terms. None where ``y`` leaves a
+        residual above :data:`KERNEL_RESIDUAL` of some field's scale (collective).
+        """
+        columns = {k: v[:, None] for k, v in masters.items()}
+        rhs = np.zeros(self.size)
+        rhs[self.kept_local] -= self.coupling(columns)[self.kept_slice, 0]
+        if self._field_residual(rhs - self._apply_A(y), rhs, y) > KERNEL_RESIDUAL:
+            return None
+        x, Ay = self._vectors[0], self._vectors[2]
+        x.array[:] = y
+        self.A_bulk.mult(x, Ay)
+        kept = self.kept_local
+        y_s, Ay_s = self._gather_kept(y[kept]), self._gather_kept(Ay.array[kept])
+        out = self._master_residuals(lambda at: -Ay_s[at, None], y_s[:, None], columns)
+        return {k: r[:, 0] for k, r in out.items()}
 
     def _solve_kept(self, rhs_s: Matrix) -> Matrix:
         """``(Σ + L)⁻¹ rhs_s`` by the scaled dense factorisation of the Schur block."""
