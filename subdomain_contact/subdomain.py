@@ -27,7 +27,7 @@ field's master residual is below its own absolute tolerance.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +36,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from subdomain_contact.correctors import Corrector, Exact, SparseStrip, StripSolve
-from subdomain_contact.modes import modes
+from subdomain_contact.masters import MasterLayer
+from subdomain_contact.modes import Mode, modes
 from subdomain_contact.physics import FIELDS
 from subdomain_contact.system import System
 
@@ -687,23 +688,18 @@ class Subdomains:
             for name, body in system.bodies.items():
                 if body.schur or name in self.dense or not body.layers:
                     continue
-                layers = {k: system.layers[k] for k in body.layers}
-                middle = np.concatenate([layer.coordinates for layer in layers.values()])
-                middle = middle.mean(axis=0)
+                layers = [system.layers[k] for k in body.layers]
+                dim = body.forms.W.mesh.geometry.dim
+                middle, own = _mode_traces(layers, system.problem.fields, dim)
                 traces, values, answers = [], [], []
-                for mode in modes(system.problem.fields, body.forms.W.mesh.geometry.dim):
-                    trace = {
-                        k: system.active[k] * np.concatenate(
-                            [mode(f, c, layer.coordinates - middle) for f, c in layer.channels]
-                        )
-                        for k, layer in layers.items()
-                    }  # fmt: skip
+                for mode, trace in own:
+                    trace = {k: system.active[k] * v for k, v in trace.items()}
                     if not any(v.any() for v in trace.values()):
                         continue
                     y = body.mode_values(mode, middle)
                     answer = body.respond_by(y, trace)
                     if answer is not None:
-                        traces.append(np.concatenate([trace[k] for k in layers]))
+                        traces.append(np.concatenate([trace[k] for k in body.layers]))
                         values.append(y)
                         answers.append(answer)
                 if traces:
@@ -712,7 +708,7 @@ class Subdomains:
                         traces=K,
                         fit=np.linalg.pinv(K),
                         values=np.column_stack(values),
-                        answers={k: np.column_stack([a[k] for a in answers]) for k in layers},
+                        answers={k: np.column_stack([a[k] for a in answers]) for k in body.layers},
                     )
 
         together(system.comm, find)
@@ -785,12 +781,11 @@ class Subdomains:
             layers = [system.layers[i.name] for i in scene.interfaces_of(body)]
             if not layers or body in whole:
                 continue
-            centre = np.concatenate([layer.coordinates for layer in layers]).mean(axis=0)
-            for mode in modes(system.problem.fields, scene.bodies[body].mesh.geometry.dim):
+            dim = scene.bodies[body].mesh.geometry.dim
+            for _, trace in _mode_traces(layers, system.problem.fields, dim)[1]:
                 z = np.zeros(self.size)
-                for layer in layers:
-                    values = [mode(f, c, layer.coordinates - centre) for f, c in layer.channels]
-                    z[self.slices[layer.interface.name]] = 0.5 * np.concatenate(values)
+                for k, values in trace.items():
+                    z[self.slices[k]] = 0.5 * values
                 columns.append(z * self.active)
         if not columns:
             return np.zeros((self.size, 0))
@@ -1076,6 +1071,30 @@ class _Preconditioner:
         full = np.concatenate(x.getComm().tompi4py().allgather(x.getArray(readonly=True)))
         start, end = x.getOwnershipRange()
         y.setArray(self.solver.precondition(full / self.weights)[start:end])
+
+
+def _mode_traces(
+    layers: Sequence[MasterLayer], fields: tuple[str, ...], dim: int
+) -> tuple[npt.NDArray[np.float64], list[tuple[Mode, dict[str, Vector]]]]:
+    """A body's kernel modes on the master layers of its interfaces.
+
+    Returns the centre of the rotations (the mean of the layers' nodes) [m], and each mode
+    with interface -> its values on that layer's channels.
+    """
+    middle = np.concatenate([layer.coordinates for layer in layers]).mean(axis=0)
+    traces = [
+        (
+            mode,
+            {
+                layer.interface.name: np.concatenate(
+                    [mode(f, c, layer.coordinates - middle) for f, c in layer.channels]
+                )
+                for layer in layers
+            },
+        )
+        for mode in modes(fields, dim)
+    ]
+    return middle, traces
 
 
 def together(comm: MPI.Comm, work: Callable[[], None]) -> None:
