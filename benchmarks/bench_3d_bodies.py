@@ -13,19 +13,20 @@ before it (the largest over the ranks; Linux: the peak is reset through
 ``/proc/self/clear_refs``), and the largest difference between the two solutions over T, φ and
 the three components of u, each relative to the field's range. ``--bodies iterative`` solves the
 subdomain route's bodies by GMRES + GAMG per field, ``--bodies split`` by GMRES on their (T, φ)
-and u blocks factorised in single precision (``body.FACTORISED_SWEEP``); ``--no-monolithic``
-leaves the monolithic Newton out where it does not fit; ``--history`` prints each Newton's
-iterates, ``--progress`` a line per iterate as it comes; ``--gamg`` also runs the monolithic
-Newton with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, stopping at Newton's
-tolerance per field) and prints its outcome, ``--gamg-only`` that Newton alone; ``--splits
-direct single`` also runs the monolithic Newton by GMRES on one sweep over (T, φ), then u, each
-factorised by MUMPS (``sc.FIELDSPLIT_DIRECT``; ``single``: in single precision with block
-low-rank factors, ``sc.FIELDSPLIT_SINGLE``, the collector bar slot's route at ≥ 1M DOFs), after
-the others (alone with ``--no-monolithic --no-subdomain``). ``--mumps-estimate`` runs no Newton:
-it prints MUMPS's own estimate of the monolithic factorisation's memory (INFOG(16), INFOG(17),
-in-core, after its analysis of the merged Jacobian at 300 K; the factorisation is then refused
-by a 1 MB cap, ICNTL(23)), to set beside the measured peaks where the monolithic Newton runs and
-to tell whether it fits where it does not.
+and u blocks factorised in single precision (``body.FACTORISED_SWEEP``), and ``--lag`` keeps the
+interface preconditioner across Newton steps there too (``sc.Subdomains(lag=True)``);
+``--no-monolithic`` leaves the monolithic Newton out where it does not fit; ``--history`` prints
+each Newton's iterates, ``--progress`` a line per iterate as it comes; ``--gamg`` also runs the
+monolithic Newton with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, stopping at
+Newton's tolerance per field) and prints its outcome, ``--gamg-only`` that Newton alone;
+``--splits direct single`` also runs the monolithic Newton by GMRES on one sweep over (T, φ),
+then u, each factorised by MUMPS (``sc.FIELDSPLIT_DIRECT``; ``single``: in single precision with
+block low-rank factors, ``sc.FIELDSPLIT_SINGLE``, the collector bar slot's route at ≥ 1M DOFs),
+after the others (alone with ``--no-monolithic --no-subdomain``). ``--mumps-estimate`` runs no
+Newton: it prints MUMPS's own estimate of the monolithic factorisation's memory (INFOG(16),
+INFOG(17), in-core, after its analysis of the merged Jacobian at 300 K; the factorisation is
+then refused by a 1 MB cap, ICNTL(23)), to set beside the measured peaks where the monolithic
+Newton runs and to tell whether it fits where it does not.
 
 Run: ``./dev python benchmarks/bench_3d_bodies.py`` (``--sizes 0.05 0.025``), and under
 ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``: the monolithic MUMPS Newton spreads the blocks
@@ -62,6 +63,10 @@ parser.add_argument(
     "--bodies", default="auto", choices=["auto", "direct", "iterative", "split"],
     help="the subdomain route's body solves (sc.System's solver): auto is split for a "
     "3D body whose largest front exceeds scene.FRONT_ABOVE DOFs",
+)  # fmt: skip
+parser.add_argument(
+    "--lag", action="store_true",
+    help="keep the interface preconditioner where bodies are by the sweep too (lag=True)",
 )  # fmt: skip
 parser.add_argument("--history", action="store_true", help="print each Newton's history")
 parser.add_argument("--progress", action="store_true", help="a line per Newton iterate")
@@ -170,7 +175,7 @@ for size in args.sizes:
     else:
         scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
         sub, sub_seconds, sub_memory, dofs, difference = newton(
-            scene, sc.Subdomains(), reference, args.bodies
+            scene, sc.Subdomains(lag=True if args.lag else None), reference, args.bodies
         )
     if comm.rank == 0 and sub is not None:
         total = sum(v for k, v in dofs.items() if k != "masters")

@@ -193,8 +193,8 @@ class Subdomains:
             several interfaces, floats, is solved iteratively or is spread with many master
             DOFs (above), else the fixed point.
         coarse: Add the coarse correction to the Krylov preconditioner.
-        lag: Where some body is solved by AMG, keep the interface Krylov's
-            preconditioner (the strip's factorisation, the coarse matrix, whose columns
+        lag: ``None`` (the default): where some body is solved by AMG, keep the interface
+            Krylov's preconditioner (the strip's factorisation, the coarse matrix, whose columns
             cost iterative body solves) from one set-up to the next (Newton steps, time
             steps) while it serves: it is rebuilt when the active master DOFs change, and
             at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
@@ -210,7 +210,14 @@ class Subdomains:
             530.5 s, 3 strip factorisations saved and 5 rounds added), so there it is
             rebuilt every time; likewise with bodies solved by the factorised sweep (the
             slot nested to 174,240 DOFs, its block so solved, 2 ranks: 295.7 s rebuilt
-            against 347.4 s kept on the fine level, 92.0 s against 177.8 s on 34,510).
+            against 347.4 s kept on the fine level, 92.0 s against 177.8 s on 34,510; at
+            34,510 alone on 2026-12-07: 36.0 s against 76.5 s). ``True``: kept also where
+            the iterative bodies are by the sweep, which pays where the kept preconditioner
+            serves across Newton steps and a build is dear: the row of four 3D blocks,
+            every block by the sweep, the inner two floating (their modes' coarse columns
+            are the build's body solves), 2 ranks, one run each: 1,442.2 s against 1,683.4
+            s rebuilt at 1.01M DOFs, 32.3 s against 36.7 s at 74,580. ``False``: rebuilt
+            at every set-up.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body condensed on its contact DOFs
             forms it (from its Schur block, or a thin body by multi-column solves), and
@@ -230,7 +237,7 @@ class Subdomains:
         *,
         krylov: bool | None = None,
         coarse: bool = True,
-        lag: bool = True,
+        lag: bool | None = None,
         dense_limit: int | None = None,
         max_rounds: int = 100,
         max_refinements: int = 5,
@@ -320,9 +327,9 @@ class Subdomains:
         weigh = self.use_krylov and iterative and not system.symmetric
         weigh = weigh and "displacement" in system.problem.fields
         self.error_weights = self._error_weights() if weigh else None
-        by_amg = any(b.iterative and not b.split for b in system.bodies.values())
-        by_amg = system.comm.allreduce(by_amg, op=MPI.LOR)
-        lag = self.lag and self.use_krylov and by_amg  # its build costs Krylov body solves
+        kept_for = any(b.iterative and (self.lag or not b.split) for b in system.bodies.values())
+        kept_for = system.comm.allreduce(kept_for, op=MPI.LOR)
+        lag = self.lag is not False and self.use_krylov and kept_for  # a build's Krylov solves
         self._lagged = lag and kept and not self._built["stale"]
         if lag and kept and not self._lagged and not self._room_for_strip():
             self._lagged = True  # slower, but a new factorisation of the strip would not fit
