@@ -216,8 +216,9 @@ class Subdomains:
             serves across Newton steps and a build is dear: the row of four 3D blocks,
             every block by the sweep, the inner two floating (their modes' coarse columns
             are the build's body solves), 2 ranks, one run each: 1,442.2 s against 1,683.4
-            s rebuilt at 1.01M DOFs, 32.3 s against 36.7 s at 74,580. ``False``: rebuilt
-            at every set-up.
+            s rebuilt at 1.01M DOFs, 34.4 s against 37.7 s at 74,580
+            (``bench_3d_bodies.py --bodies split --lag``). ``False``: rebuilt at every
+            set-up.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body condensed on its contact DOFs
             forms it (from its Schur block, or a thin body by multi-column solves), and
