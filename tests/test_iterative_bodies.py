@@ -290,10 +290,9 @@ def test_a_sweep_short_in_single_precision_is_factorised_again_in_double(comm):
     """The row at 18,495 DOFs (31,420 on 2 ranks), every body by the sweep: the floating
     blocks' splits are past single precision (block 1's solve ended 676 times short of its
     tolerance after the refinements, the others within theirs), and until 2026-12-06 the
-    interface Krylov
-    failed at the first Newton step, and Newton with it. Now a body whose sweep ends short,
-    or whose GMRES on it stagnates and breaks down, is factorised again in double
-    precision, once, and Newton reaches the monolithic solution."""
+    interface Krylov failed at the first Newton step, and Newton with it. Now a body whose
+    sweep ends short, or whose GMRES on it stagnates and breaks down, is factorised again
+    in double precision, once, and Newton reaches the monolithic solution."""
     doubled = {}
 
     def inspect(system):
