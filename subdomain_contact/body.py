@@ -30,7 +30,7 @@ A body solved *iteratively* (a large 3D body, where a sparse factorisation grows
 than the mesh) solves ``A`` by CG (GMRES where ``A`` is not symmetric) preconditioned by
 smoothed-aggregation AMG (PETSc's GAMG) with its kernel modes as the near-null space; its
 interface operator is only ever applied, one solve per application. A large 3D body of T or φ
-and of u is solved that way too, by GMRES on one sweep over its (T, φ) and u blocks, each
+and of u is solved that way too, by FGMRES on one sweep over its (T, φ) and u blocks, each
 factorised (:data:`FACTORISED_SWEEP`).
 """
 
@@ -57,6 +57,7 @@ from subdomain_contact.solvers import (
     BLOCK_LOW_RANK,
     DIRECT,
     THERMOELECTRIC_MECHANICAL,
+    RowScaledKrylov,
     destroy,
     factorise,
     fits_freed,
@@ -121,12 +122,13 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "gamg", "pc_gamg_threshold": "0.02"}
 )
 
-#: A body of T or φ and of u solved by GMRES on one block Gauss-Seidel sweep over (T, φ), then u
+#: A body of T or φ and of u solved by FGMRES on one block Gauss-Seidel sweep over (T, φ), then u
 #: (:data:`~subdomain_contact.solvers.THERMOELECTRIC_MECHANICAL`), each split's block factorised by
 #: MUMPS in single precision with block low-rank factors (``pc_precision``,
 #: :data:`~subdomain_contact.solvers.BLOCK_LOW_RANK`): the monolithic Newton's ``FIELDSPLIT_SINGLE``
-#: on one body (GMRES left-preconditioned here, as :data:`SPLIT`). The sweep is exact but for the
-#: contacts' dependence on u, and GMRES makes up for it and for the precision (each field's true
+#: on one body, its rows weighed by each field's scale
+#: (:class:`~subdomain_contact.solvers.RowScaledKrylov`). The sweep is exact but for the
+#: contacts' dependence on u, and FGMRES makes up for it and for the precision (each field's true
 #: residual checked after, :meth:`Body._solve_whole`), so a solve is a few pairs of triangular
 #: solves on two factorisations of 2 and 3 unknowns a node, which fit where one of 5 does not. Where
 #: a 3D body of several fields is too large to factorise whole, this replaces GAMG per field, whose
@@ -134,6 +136,7 @@ SPLIT_FIELD: Mapping[str, str] = MappingProxyType(
 #: at 1.07M DOFs from converging in two hours (docs/collector_bar_slot.md).
 FACTORISED_SWEEP: Mapping[str, str] = MappingProxyType(
     SPLIT
+    | {"ksp_type": "fgmres"}
     | {
         f"fieldsplit_{split}_{k}": v
         for split in THERMOELECTRIC_MECHANICAL
@@ -150,14 +153,17 @@ FACTORISED_SWEEP: Mapping[str, str] = MappingProxyType(
 #: 10,460, 18,495 and 31,420 DOFs (the other bodies' within theirs, refined), and
 #: from 18,495 DOFs the interface Krylov failed at the first Newton step (true residual 7e6
 #: and 1.6e20 times its tolerance), and Newton with it; block 1 in double: 13 Newton steps,
-#: as the monolithic Newton, the others kept single.
+#: as the monolithic Newton, the others kept single. Those shortfalls were GMRES's, whose
+#: residual estimate drifts by single precision's round-off; by FGMRES
+#: (:class:`~subdomain_contact.solvers.RowScaledKrylov`, 2026-12-07) no sweep of the row ends
+#: short, and this stays the way out for one that does.
 FACTORISED_SWEEP_DOUBLE: Mapping[str, str] = MappingProxyType(
     FACTORISED_SWEEP
     | {f"fieldsplit_{split}_pc_precision": "double" for split in THERMOELECTRIC_MECHANICAL}
 )
 
 #: How a body is solved: factorised whole (``direct``), by Krylov + AMG (``iterative``), or
-#: by GMRES on the factorised sweep over its fields (``split``, :data:`FACTORISED_SWEEP`).
+#: by FGMRES on the factorised sweep over its fields (``split``, :data:`FACTORISED_SWEEP`).
 SOLVERS = ("direct", "iterative", "split")
 
 #: Refinements of an iterative solve of a body of several fields, at most, while one
@@ -206,7 +212,7 @@ class Body:
             (:func:`~subdomain_contact.schur.condensation`); otherwise the whole body matrix
             is factorised and ``S^α`` applied by body solves.
         solver: One of :data:`SOLVERS`: ``"direct"`` (a factorisation), ``"iterative"``
-            (Krylov + AMG, :data:`ITERATIVE` or :data:`SPLIT`) or ``"split"`` (GMRES on the
+            (Krylov + AMG, :data:`ITERATIVE` or :data:`SPLIT`) or ``"split"`` (FGMRES on the
             factorised sweep, :data:`FACTORISED_SWEEP`, for a body of T or φ and of u);
             options under ``prefix`` win.
 
@@ -249,7 +255,7 @@ class Body:
             )
         #: Solved by a Krylov method (AMG, or the factorised sweep), not one factorisation.
         self.iterative = solver != "direct"
-        #: Solved by GMRES on the factorised sweep (:data:`FACTORISED_SWEEP`).
+        #: Solved by FGMRES on the factorised sweep (:data:`FACTORISED_SWEEP`).
         self.split = solver == "split"
         #: The sweep's options: single precision until a solve falls short (:meth:`_solve_whole`).
         self.sweep = FACTORISED_SWEEP
@@ -264,6 +270,10 @@ class Body:
         self.condensed = self.schur or self.columns
         self.factor: CondensedFactor | None = None
         self.ksp: PETSc.KSP | None = None
+        #: The sweep's flexible Krylov solve on rows weighed by field (a split body's).
+        self._scaled_krylov: RowScaledKrylov | None = None
+        #: Each field's scale of the split body's last FGMRES solve (:meth:`_weigh`).
+        self._solved_scales = np.zeros(0)
         #: MUMPS on the body's matrix where its Krylov solve failed, until the matrix changes.
         self._direct: PETSc.KSP | None = None
         #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`), and
@@ -361,6 +371,7 @@ class Body:
         if self.factor is not None:
             self.factor.destroy()
         mats = [m for forms in self.block_matrices.values() for m in forms.values()]
+        self._drop_scaled_krylov()
         destroy(self.ksp, self._direct, self.A_bulk, self._A, self._scaled, self._kept_is)
         destroy(*mats, *self._vectors, *self._near_null)
         self.factor, self.ksp, self._direct, self._A, self._near_null = None, None, None, None, []
@@ -628,6 +639,7 @@ class Body:
         rtol = None if self.ksp is None else self.ksp.getTolerances()[0]  # an iterative one's
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
+        self._drop_scaled_krylov()  # made again on the new matrix at the next solve
         if self.ksp is not None and self.split:
             self._room_for_sweep()
         elif self.ksp is not None and not self.iterative:
@@ -667,8 +679,14 @@ class Body:
 
     def _drop_ksp(self) -> None:
         """Free the body's KSP (its factors) and the index sets it was made with."""
+        self._drop_scaled_krylov()
         destroy(self.ksp, *self._near_null)
         self.ksp, self._near_null = None, []
+
+    def _drop_scaled_krylov(self) -> None:
+        if self._scaled_krylov is not None:
+            self._scaled_krylov.destroy()
+            self._scaled_krylov = None
 
     def _room_for_sweep(self) -> None:
         """Make room to factorise the sweep's splits again (collective).
@@ -834,14 +852,21 @@ class Body:
             # a tenth of the shortfall only: a refinement to the full tolerance repeated
             # the whole reduction on the residual (the row of four blocks at 31k DOFs: 36,
             # 26 and 14 iterations per refinement where 9, 7 and 7 suffice, the same count
-            # of refinements; body Krylov 32.8 s → 27.1 s, 13 Newton steps both).
+            # of refinements; body Krylov 32.8 s → 27.1 s, 13 Newton steps both). A split
+            # body's FGMRES already weighs each field's rows by a scale (:meth:`_krylov`),
+            # and its fields are measured against the larger of that and their own.
             target = max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
             for refinement in range(FIELD_REFINEMENTS + 1):
                 residual = rhs - self._apply_A(y)
-                shortfall = self._field_residual(residual, rhs, y) / target
+                if self.split:
+                    scales = np.maximum(self._field_scales(rhs, y), self._solved_scales)
+                    shortfall = self._scaled_residual(residual, scales) / target
+                else:
+                    shortfall = self._field_residual(residual, rhs, y) / target
                 if shortfall <= 1.0 or refinement == FIELD_REFINEMENTS:
                     break
-                y += self._krylov(residual, rtol=max(target, 0.1 / shortfall))
+                rtol = max(target, 0.1 / shortfall)
+                y += self._krylov(residual, rtol, scales if self.split else None)
             if shortfall > 1.0 and self._may_double and self._sweep_in_double():
                 return self._solve_whole(rhs)
         return y
@@ -867,7 +892,9 @@ class Body:
         self.fallbacks += 1
         return True
 
-    def _krylov(self, rhs: Vector, rtol: float | None = None) -> Vector:
+    def _krylov(
+        self, rhs: Vector, rtol: float | None = None, scales: Vector | None = None
+    ) -> Vector:
         """One Krylov solve (or solve by the factorisation) of ``A y = rhs``.
 
         Where an iterative body's Krylov solve fails (GMRES + GAMG broke down, PETSc reason
@@ -879,27 +906,41 @@ class Body:
         one is, and solves again. Where MUMPS's analysis
         says those factors would not fit in the node's memory left, a ``MemoryError`` says so
         and what to try (:func:`~subdomain_contact.solvers.refuse_factorisation`).
+        A split body solves by FGMRES on its rows weighed by ``1 / scales`` of their field
+        (:class:`~subdomain_contact.solvers.RowScaledKrylov`): by default each field's scale
+        for ``rhs`` and one sweep on it (:meth:`_field_scales`), the scales then kept in
+        ``_solved_scales``.
         """
         b, x = self._vectors[0], self._vectors[1]
         b.array[:] = rhs
         if self._direct is not None:
             self._direct.solve(b, x)
             return self._checked(self._direct, x)
-        if rtol is not None:
-            kept = self.ksp.getTolerances()[0]
-            self.ksp.setTolerances(rtol=rtol)
-        self.ksp.solve(b, x)
-        if rtol is not None:
-            self.ksp.setTolerances(rtol=kept)
-        reason, iterations = self.ksp.getConvergedReason(), self.ksp.getIterationNumber()
+        ksp = self.ksp
+        if self.split:
+            if self._scaled_krylov is None:
+                key = self.prefix + "ksp_gmres_restart"
+                restart = PETSc.Options().getInt(key, int(self.sweep["ksp_gmres_restart"]))
+                self._scaled_krylov = RowScaledKrylov(self.ksp, self._A, restart)
+            ksp = self._scaled_krylov.ksp
+            rtol = self.ksp.getTolerances()[0] if rtol is None else rtol
+            x = self._scaled_krylov.solve(b, lambda b, y: self._weigh(b, y, scales), rtol)
+        else:
+            if rtol is not None:
+                kept = ksp.getTolerances()[0]
+                ksp.setTolerances(rtol=rtol)
+            ksp.solve(b, x)
+            if rtol is not None:
+                ksp.setTolerances(rtol=kept)
+        reason, iterations = ksp.getConvergedReason(), ksp.getIterationNumber()
         self.solve_iterations += iterations if self.iterative else 0
         if reason < 0 and self.iterative and self._may_double and self._sweep_in_double():
             # a sweep in single precision that stagnates is doubled before MUMPS takes the
             # body whole (the row at 18,495 DOFs: block 0's GMRES broke down at its restart
             # of 100 iterations, stuck at 4e-5 of its start, on a coarse column at step 12)
-            return self._krylov(rhs, rtol)
+            return self._krylov(rhs, rtol, scales)
         if reason < 0 and self.iterative:
-            kind = f"{self.ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
+            kind = f"{ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
             what = (
                 f"body '{self.name}' ({kind} stopped with PETSc reason {reason} after "
                 f"{iterations} iterations; MUMPS instead)"
@@ -915,7 +956,49 @@ class Body:
             self.factorisations += 1
             self.fallbacks += 1
             return self._krylov(rhs)
-        return self._checked(self.ksp, x)
+        return self._checked(ksp, x)
+
+    def _field_scales(self, rhs: Vector, y: Vector) -> Vector:
+        """Each field's scale ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (:meth:`_field_residual`), all ranks."""
+        scales = np.array(
+            [
+                np.abs(rhs[dofs]).max(initial=0.0)
+                + self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
+                for f, dofs in enumerate(self._field_dofs)
+            ]
+        )
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, scales, op=MPI.MAX)
+        return scales
+
+    def _scaled_residual(self, residual: Vector, scales: Vector) -> float:
+        """The largest over fields of ``‖r_f‖∞ / scale_f`` (every rank)."""
+        ratios = np.array(
+            [np.abs(residual[dofs]).max(initial=0.0) for dofs in self._field_dofs]
+        ) / np.maximum(scales, 1e-300)
+        return self.comm.allreduce(ratios.max(), op=MPI.MAX)
+
+    def _weigh(self, rhs: PETSc.Vec, y: PETSc.Vec, scales: Vector | None) -> Vector:
+        """Each owned row's weight in a split body's FGMRES: ``1 / scale`` of its field.
+
+        ``scales`` where given, else :meth:`_field_scales` with ``y`` an estimate of the
+        solution (one sweep on ``rhs``). A field of zero scale takes the largest weight of
+        the others (1 where every scale is zero). The scales are kept (``_solved_scales``) for
+        the solve's own test (:meth:`_solve_whole`): a field whose solution is the round-off
+        of the others (the potential of a column with no current, 1e-17 where its sweep gave
+        1e-3) is measured against the scale it was solved to, not its own, which FGMRES
+        drives down with it (the row at 218,790 DOFs: 2.5e10 times short by its own, its
+        refinements 2,211 iterations, then the sweep doubled and MUMPS).
+        """
+        if scales is None:
+            scales = self._field_scales(rhs.array_r, y.array_r)
+        weights = np.divide(1.0, scales, out=np.zeros_like(scales), where=scales > 0)
+        weights[scales == 0] = weights.max(initial=0.0) or 1.0
+        self._solved_scales = 1.0 / weights
+        out = np.empty(self.size)
+        for f, dofs in enumerate(self._field_dofs):
+            out[dofs] = weights[f]
+        return out
 
     def _checked(self, ksp: PETSc.KSP, x: PETSc.Vec) -> Vector:
         """The solution ``x`` of ``ksp``, or an error naming the body."""

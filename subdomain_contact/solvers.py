@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 
 import numpy as np
@@ -19,6 +19,7 @@ __all__ = [
     "REFACTORISATION_MARGIN",
     "SWEEP_DIRECT",
     "THERMOELECTRIC_MECHANICAL",
+    "RowScaledKrylov",
     "available_memory",
     "destroy",
     "factorisation_memory",
@@ -111,8 +112,13 @@ BLOCK_LOW_RANK: Mapping[str, str] = MappingProxyType(
 #: GMRES on the true residual (rtol 1e-12) makes up for both: the slot at 17,335 DOFs, nested
 #: from 5,595, 5–8 iterations a step against 1–4 (single, full-rank), the same voltage drop
 #: (179.64 mV); at 1.2M DOFs the fine level in 639 s against 1,059 s (single, full-rank).
+#: Flexible GMRES since 2026-12-07 (:class:`RowScaledKrylov` says why): the row of four 3D
+#: blocks at 1,011,295 DOFs (2 ranks, one run each) took 13 full Newton steps, 488
+#: iterations, 610.5 s, where GMRES's first full steps broke down at the second (reason -5)
+#: and limited steps took 11, 477 iterations, 840.6 s.
 FIELDSPLIT_SINGLE: Mapping[str, str] = MappingProxyType(
     FIELDSPLIT_DIRECT
+    | {"ksp_type": "fgmres"}
     | {
         f"fieldsplit_{split}_{k}": v
         for split in THERMOELECTRIC_MECHANICAL
@@ -242,6 +248,108 @@ def set_up(ksp: PETSc.KSP) -> None:
     pc = ksp.getPC()
     for sub in pc.getFieldSplitSubKSP() if pc.getType() == "fieldsplit" else ():
         sub.setUp()
+
+
+class _ScaledRows:
+    """``D A`` as a PETSc Python matrix (``D``: a diagonal, as a vector)."""
+
+    def __init__(self, A: PETSc.Mat, d: PETSc.Vec) -> None:
+        self.A, self.d = A, d
+
+    def mult(self, _: PETSc.Mat, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        self.A.mult(x, y)
+        y.pointwiseMult(y, self.d)
+
+
+class _Unscaled:
+    """``M⁻¹ D⁻¹`` as a PETSc Python preconditioner, ``M⁻¹`` a set-up PC on ``A``.
+
+    ``first``: ``M⁻¹ b̂ / ‖D b̂‖`` computed before the solve, given for the first application
+    where its argument is the Krylov method's first basis vector ``D b̂ / ‖D b̂‖`` (checked).
+    """
+
+    def __init__(self, pc: PETSc.PC, d: PETSc.Vec) -> None:
+        self.pc, self.d = pc, d
+        self.work, self.basis = d.duplicate(), d.duplicate()
+        self.first: PETSc.Vec | None = None
+
+    def apply(self, _: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        first, self.first = self.first, None
+        if first is not None:
+            self.work.waxpy(-1.0, x, self.basis)
+            if self.work.norm(PETSc.NormType.INFINITY) <= 1e-12:  # |basis| ≤ 1: absolute
+                first.copy(y)
+                return
+        self.work.pointwiseDivide(x, self.d)
+        self.pc.apply(self.work, y)
+
+    def destroy(self, _: PETSc.PC) -> None:
+        """Free its vectors (called by PETSc as the preconditioner is destroyed)."""
+        destroy(self.work, self.basis)
+
+
+class RowScaledKrylov:
+    """A flexible Krylov solve of ``A x = b`` with each row weighed, right-preconditioned.
+
+    Solves ``D A x = D b`` (``D`` diagonal, set per solve) preconditioned on the right by
+    ``M⁻¹ D⁻¹``, where ``M⁻¹`` is ``ksp``'s set-up preconditioner on ``A`` (ksp itself is
+    not solved: its type, tolerances and preconditioner are used), so the test is on
+    the true residual weighed row by row: fields of different units (W, A, N) each count at
+    their own scale. Flexible GMRES (``ksp``'s type, FGMRES by default in the presets that use
+    it) keeps every application of ``M⁻¹`` it made, so its residual stays the true one to
+    double precision where ``M⁻¹`` is applied in single precision (Arioli & Duff, 2009, *Using
+    FGMRES to obtain backward stability in mixed precision*, ETNA 33): left-preconditioned
+    GMRES's estimate of the preconditioned residual drifted from the true one by single
+    precision's round-off, 1e4-1e5 times the tolerance on the row of four 3D blocks.
+    """
+
+    def __init__(self, ksp: PETSc.KSP, A: PETSc.Mat, restart: int) -> None:
+        comm = A.getComm()
+        self.d = A.createVecRight()
+        self.x, self.b, self.first = A.createVecRight(), A.createVecRight(), A.createVecRight()
+        self.operator = PETSc.Mat().createPython(A.getSizes(), _ScaledRows(A, self.d), comm=comm)
+        self.operator.setUp()
+        self.context = _Unscaled(ksp.getPC(), self.d)
+        pc = PETSc.PC().createPython(self.context, comm=comm)
+        self.ksp = PETSc.KSP().create(comm)
+        self.ksp.setType(ksp.getType())
+        if ksp.getType() in ("gmres", "fgmres"):
+            self.ksp.setGMRESRestart(restart)
+        self.ksp.setPC(pc)
+        pc.destroy()
+        self.ksp.setOperators(self.operator)
+        if ksp.getType() != "fgmres":
+            self.ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+        self.ksp.setTolerances(rtol=ksp.getTolerances()[0], max_it=ksp.getTolerances()[3])
+
+    def solve(
+        self, b: PETSc.Vec, weigh: Callable[[PETSc.Vec, PETSc.Vec], np.ndarray], rtol: float
+    ) -> PETSc.Vec:
+        """``x`` of ``A x = b`` to ``‖D (b - A x)‖₂ ≤ rtol ‖D b‖₂``, ``D = diag(weigh(b, M⁻¹ b))``.
+
+        ``M⁻¹ b`` is the method's first application, made here to give the weights (an
+        estimate of the solution) and handed to it. Returns the solution vector (owned by
+        this object: copy it); the iteration count and reason are ``self.ksp``'s.
+        """
+        first = self.first
+        self.context.pc.apply(b, first)
+        self.d.array[:] = weigh(b, first)
+        self.b.pointwiseMult(b, self.d)
+        norm = self.b.norm()
+        if norm > 0:
+            first.scale(1.0 / norm)
+            self.b.copy(self.context.basis)
+            self.context.basis.scale(1.0 / norm)
+            self.context.first = first
+        self.ksp.setTolerances(rtol=rtol)
+        self.ksp.solve(self.b, self.x)
+        self.context.first = None
+        return self.x
+
+    def destroy(self) -> None:
+        """Free its PETSc objects (not ``ksp``'s)."""
+        destroy(self.ksp, self.operator, self.d, self.x, self.b, self.first)
 
 
 def factorise(

@@ -65,8 +65,9 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
 
     The option, else ``solver``, else the rule: a large 3D body
     (:func:`~subdomain_contact.scene.iterative_by_size`) of T or φ and of u by the factorised
-    sweep where its own boundary holds every component of u (:func:`_anchored`), any other
-    large one by AMG, the rest factorised.
+    sweep, floating or held (by FGMRES on weighed rows its single-precision splits reach the
+    tolerance where a floating body's translation nears their reach: docs/iterative_bodies.md),
+    any other large one by AMG, the rest factorised.
     """
     options = PETSc.Options()
     if options.hasName(prefix + "solver"):
@@ -79,30 +80,7 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
     if not iterative_by_size(mesh, per_node):
         return "direct"
-    return "split" if sweepable(problem.fields) and _anchored(problem, body) else "iterative"
-
-
-def _anchored(problem: Problem, body) -> bool:
-    """Whether Displacement conditions on the body's own boundary hold every component of u.
-
-    A body held along some axis by its contacts alone has a displacement block whose rigid
-    motion along it only the contact ties resist (2e-12 of the bulk's row sums): the
-    factorised sweep's splits then fall short even in double precision. The row of four 3D
-    blocks at 1.01M DOFs, its two inner blocks held along x by their contacts, all by the
-    sweep: block 1's GMRES failed at the first Newton step (MUMPS took it, whole, in double),
-    block 2's solves ended 111-124 times short at the second, doubled, and the interface
-    Krylov stalled 1e4 times above its tolerance (the splits applied on the right: block 1
-    failed the same way). With the inner blocks by AMG it converges (docs/iterative_bodies.md).
-    Since their translation answers by a product (``Subdomains._find_kernels``) the row
-    converges all by the sweep too, but in 0.96 of the time for 1.39 times the memory
-    (1,683.4 s, 8.98 GiB, one run): the rule stands.
-    """
-    held = {
-        bc.component
-        for bc in problem.conditions
-        if isinstance(bc, Displacement) and bc.boundary in body.boundaries
-    }
-    return held >= set(range(body.mesh.geometry.dim))
+    return "split" if sweepable(problem.fields) else "iterative"
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:

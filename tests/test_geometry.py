@@ -240,7 +240,7 @@ def test_bodies_of_two_solvers_are_packed_kind_by_kind():
 
     Four blocks in a row of decreasing cells: packed by cells alone (largest first onto the
     lightest rank) the ends share rank 0 and the inner two rank 1; with the ends by the
-    sweep and the inner two by AMG (the row of 3D blocks, ``system._anchored``) each rank
+    sweep and the inner two by AMG (the row of 3D blocks, the inner two by their option) each rank
     holds one of each. One kind packs as by cells alone. The collector bar slot's block by
     the sweep, its cast iron and bar factorised (cells as above): the light kind stays off
     the block's rank, as by cells.
