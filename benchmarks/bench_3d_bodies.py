@@ -12,8 +12,9 @@ and their ratio measured in the same run, the peak resident set of each Newton a
 before it (the largest over the ranks; Linux: the peak is reset through
 ``/proc/self/clear_refs``), and the largest difference between the two solutions over T, φ and
 the three components of u, each relative to the field's range. ``--bodies iterative`` solves the
-subdomain route's bodies by GMRES + GAMG per field, ``--bodies split`` by GMRES on their (T, φ)
-and u blocks factorised in single precision (``body.FACTORISED_SWEEP``), and ``--lag`` keeps the
+subdomain route's bodies by GMRES + GAMG per field, ``--bodies split`` by FGMRES on their (T, φ)
+and u blocks factorised in single precision (``body.FACTORISED_SWEEP``; the rule's choice for
+every block at 1M DOFs), and ``--lag`` keeps the
 interface preconditioner across Newton steps there too (``sc.Subdomains(lag=True)``);
 ``--no-monolithic`` leaves the monolithic Newton out where it does not fit; ``--history`` prints
 each Newton's iterates, ``--progress`` a line per iterate as it comes; ``--gamg`` also runs the
@@ -21,7 +22,8 @@ monolithic Newton with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, st
 Newton's tolerance per field) and prints its outcome, ``--gamg-only`` that Newton alone;
 ``--splits direct single`` also runs the monolithic Newton by GMRES on one sweep over (T, φ),
 then u, each factorised by MUMPS (``sc.FIELDSPLIT_DIRECT``; ``single``: in single precision with
-block low-rank factors, ``sc.FIELDSPLIT_SINGLE``, the collector bar slot's route at ≥ 1M DOFs),
+block low-rank factors and FGMRES, ``sc.FIELDSPLIT_SINGLE``, the collector bar slot's route at
+≥ 1M DOFs),
 after the others (alone with ``--no-monolithic --no-subdomain``). ``--mumps-estimate`` runs no
 Newton: it prints MUMPS's own estimate of the monolithic factorisation's memory (INFOG(16),
 INFOG(17), in-core, after its analysis of the merged Jacobian at 300 K; the factorisation is

@@ -18,6 +18,7 @@ from subdomain_contact.body import FACTORISED_SWEEP_DOUBLE
 from subdomain_contact.monolithic import field_splits
 from subdomain_contact.newton import FORCING, FORCING_ITERATIVE
 from subdomain_contact.physics import FIELDS
+from subdomain_contact.solvers import DIRECT, RowScaledKrylov, destroy, make_ksp
 from subdomain_contact.subdomain import Tolerance
 from verification.cases import (
     blocks3d_scene,
@@ -293,6 +294,48 @@ def test_coupled_newton_with_bodies_solved_by_the_factorised_sweep_equals_monoli
     assert result.iterations <= monolithic.iterations + 1
     # both Newtons stop at 1e-12 of the first residual: the bound of the test above
     assert max(errors) <= 1e-11
+
+
+def test_fgmres_keeps_the_true_residual_where_the_preconditioner_is_in_single_precision():
+    """A chain of 4,000 unit springs tied to the ground by 1e-2 at one end (condition about
+    1e9), ``A x = b`` to 1e-12 preconditioned by its LU in single precision (MUMPS): GMRES
+    on the left stops at its estimate, whose true residual is far above (measured 5.5e-3 of
+    ``‖b‖``: each single-precision application's round-off breaks the recurrence it
+    trusts); FGMRES on the rows (``RowScaledKrylov``, unit weights) keeps the applications
+    it made, and its true residual is its test's, 1e-12 of ``‖b‖``, plus the round-off of
+    computing ``A x`` (3 entries a row: ``3 ε ‖A‖∞ ‖x‖``; measured 1.7e-11 against
+    5.4e-11 for ``ε ‖A‖∞ ‖x‖``)."""
+    n = 4000
+    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=PETSc.COMM_SELF)
+    for i in range(n):
+        A.setValue(i, i, 2.0 if 0 < i < n - 1 else 1.0 + (1e-2 if i == 0 else 0.0))
+        if i > 0:
+            A.setValue(i, i - 1, -1.0)
+        if i < n - 1:
+            A.setValue(i, i + 1, -1.0)
+    A.assemble()
+    b = A.createVecRight()
+    b.array[:] = np.random.default_rng(0).standard_normal(n)
+    options = dict(DIRECT) | {"pc_precision": "single", "ksp_type": "gmres", "ksp_rtol": "1e-12"}
+    ksp = make_ksp(A, "test_single_", options)
+    r = b.duplicate()
+
+    def true_residual(x):
+        A.mult(x, r)
+        r.aypx(-1.0, b)
+        return r.norm() / b.norm()
+
+    x = A.createVecRight()
+    ksp.solve(b, x)
+    assert ksp.getConvergedReason() > 0  # converged, by its own estimate
+    scaled = RowScaledKrylov(ksp, A, 100)
+    y = scaled.solve(b, lambda rhs, estimate: np.ones(n), 1e-12)
+    assert scaled.ksp.getConvergedReason() > 0
+    floor = 1e-12 + 3 * np.finfo(float).eps * 4.0 * y.norm() / b.norm()
+    assert true_residual(y) <= floor
+    assert true_residual(x) > 1e3 * floor  # GMRES's drift, measured 3e4 times the floor
+    scaled.destroy()
+    destroy(ksp, A, b, x, r)
 
 
 def test_the_floating_blocks_sweeps_meet_their_tolerance_in_single_precision(comm):
