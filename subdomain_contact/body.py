@@ -812,12 +812,18 @@ class Body:
         The scale of field f: its right-hand side, and its rows' largest sum times its own
         unknowns. ``kept``: the arrays are on the contact DOFs (rows), not on the owned DOFs.
         """
-        ratios = np.zeros(len(self._field_dofs))
-        for f, dofs in enumerate(self._kept_field_dofs if kept else self._field_dofs):
-            scale = np.abs(rhs[dofs]).max(initial=0.0)
-            scale += self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
-            ratios[f] = np.abs(residual[dofs]).max(initial=0.0) / max(scale, 1e-300)
-        return self.comm.allreduce(ratios.max(), op=MPI.MAX)
+        dofs_of = self._kept_field_dofs if kept else self._field_dofs
+        return self._scaled_residual(residual, self._local_scales(rhs, y, dofs_of), dofs_of)
+
+    def _local_scales(self, rhs: Matrix, y: Matrix, dofs_of: list) -> Vector:
+        """Each field's ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` on this rank's ``dofs_of`` (by field)."""
+        return np.array(
+            [
+                np.abs(rhs[dofs]).max(initial=0.0)
+                + self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
+                for f, dofs in enumerate(dofs_of)
+            ]
+        )
 
     def _solve_schur(self, rhs: Vector) -> Vector:
         b, x = self._vectors[0], self._vectors[1]
@@ -960,23 +966,18 @@ class Body:
 
     def _field_scales(self, rhs: Vector, y: Vector) -> Vector:
         """Each field's scale ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (:meth:`_field_residual`), all ranks."""
-        scales = np.array(
-            [
-                np.abs(rhs[dofs]).max(initial=0.0)
-                + self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
-                for f, dofs in enumerate(self._field_dofs)
-            ]
-        )
+        scales = self._local_scales(rhs, y, self._field_dofs)
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, scales, op=MPI.MAX)
         return scales
 
-    def _scaled_residual(self, residual: Vector, scales: Vector) -> float:
+    def _scaled_residual(
+        self, residual: Matrix, scales: Vector, dofs_of: list | None = None
+    ) -> float:
         """The largest over fields of ``‖r_f‖∞ / scale_f`` (every rank)."""
-        ratios = np.array(
-            [np.abs(residual[dofs]).max(initial=0.0) for dofs in self._field_dofs]
-        ) / np.maximum(scales, 1e-300)
-        return self.comm.allreduce(ratios.max(), op=MPI.MAX)
+        dofs_of = self._field_dofs if dofs_of is None else dofs_of
+        largest = np.array([np.abs(residual[dofs]).max(initial=0.0) for dofs in dofs_of])
+        return self.comm.allreduce((largest / np.maximum(scales, 1e-300)).max(), op=MPI.MAX)
 
     def _weigh(self, rhs: PETSc.Vec, y: PETSc.Vec, scales: Vector | None) -> Vector:
         """Each owned row's weight in a split body's FGMRES: ``1 / scale`` of its field.
