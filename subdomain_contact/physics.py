@@ -660,7 +660,7 @@ class BodyForms:
                     points[dofs] = V.tabulate_dof_coordinates()[V.dofmap.list.ravel()]
                 node[dofs], component[dofs] = first, c
                 dof_at[first, c] = dofs
-            self._nodes = DofNodes(node, component, dof_at, points)
+            self._nodes = DofNodes(node, component, dof_at, points, parts)
         return self._nodes
 
 
@@ -673,12 +673,14 @@ class DofNodes:
         component: Each DOF's field component (the fields in order, u by component).
         dof_at: ``dof_at[n, c]``: the DOF of component c at node n (n a node's name).
         points: Each node's coordinates [m], at its name.
+        parts: Each component's (field, component of u or None), in ``component``'s order.
     """
 
     node: npt.NDArray[np.int64]
     component: npt.NDArray[np.int64]
     dof_at: npt.NDArray[np.int64]
     points: npt.NDArray[np.float64]
+    parts: list[tuple[str, int | None]]
 
 
 def split_fields(w: Expr, fields: tuple[str, ...]) -> dict[str, Expr]:
