@@ -21,6 +21,7 @@ __all__ = [
     "THERMOELECTRIC_MECHANICAL",
     "RowScaledKrylov",
     "available_memory",
+    "default_option",
     "destroy",
     "factorisation_memory",
     "factorise",
@@ -250,6 +251,15 @@ def set_up(ksp: PETSc.KSP) -> None:
         sub.setUp()
 
 
+def default_option(name: str, value: str) -> bool:
+    """Set a PETSc option unless the user has (command line, database); whether it was set."""
+    options = PETSc.Options()
+    if options.hasName(name):
+        return False
+    options.setValue(name, value)
+    return True
+
+
 class _ScaledRows:
     """``D A`` as a PETSc Python matrix (``D``: a diagonal, as a vector)."""
 
@@ -326,13 +336,11 @@ class RowScaledKrylov:
         # whole restart of 100 without meeting 1e-12, then met it 2-5 iterations after it.
         prefix = (ksp.getOptionsPrefix() or "") + "rows_"
         self.ksp.setOptionsPrefix(prefix)
-        options, key = PETSc.Options(), prefix + "ksp_gmres_cgs_refinement_type"
-        added = not options.hasName(key)
-        if added:
-            options.setValue(key, "refine_ifneeded")
+        key = prefix + "ksp_gmres_cgs_refinement_type"
+        added = default_option(key, "refine_ifneeded")
         self.ksp.setFromOptions()
         if added:
-            options.delValue(key)
+            PETSc.Options().delValue(key)
 
     def solve(
         self, b: PETSc.Vec, weigh: Callable[[PETSc.Vec, PETSc.Vec], np.ndarray], rtol: float

@@ -39,6 +39,7 @@ from subdomain_contact.correctors import Corrector, Exact, SparseStrip, StripSol
 from subdomain_contact.masters import MasterLayer
 from subdomain_contact.modes import Mode, modes
 from subdomain_contact.physics import FIELDS
+from subdomain_contact.solvers import default_option
 from subdomain_contact.system import System
 
 __all__ = [
@@ -1018,7 +1019,7 @@ class Subdomains:
             # Gram-Schmidt lose orthogonality: GMRES then stalls at 1e-5 (measured on the
             # three-body cathode at 1 V), while refined Gram-Schmidt reaches 1e-10.
             refine = f"{self.prefix}ksp_gmres_cgs_refinement_type"
-            added = _default_option(refine, "refine_always")
+            added = default_option(refine, "refine_always")
         ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         ksp.getPC().setType("python")
         ksp.getPC().setPythonContext(_Preconditioner(self, weights))
@@ -1132,15 +1133,6 @@ def together(comm: MPI.Comm, work: Callable[[], None]) -> None:
     if failures:
         memory, message = failures[0]
         raise (MemoryError if memory else RuntimeError)(f"on another rank: {message}")
-
-
-def _default_option(name: str, value: str) -> bool:
-    """Set a PETSc option unless the user has (command line, database); whether it was set."""
-    options = PETSc.Options()
-    if options.hasName(name):
-        return False
-    options.setValue(name, value)
-    return True
 
 
 def _describe(tolerance: Tolerance) -> str:
