@@ -14,8 +14,8 @@ before it (the largest over the ranks; Linux: the peak is reset through
 the three components of u, each relative to the field's range. ``--bodies iterative`` solves the
 subdomain route's bodies by GMRES + GAMG per field, ``--bodies split`` by FGMRES on their (T, φ)
 and u blocks factorised in single precision (``body.FACTORISED_SWEEP``; the rule's choice for
-every block at 1M DOFs), and ``--lag`` keeps the
-interface preconditioner across Newton steps there too (``sc.Subdomains(lag=True)``);
+every block at 1M DOFs), and ``--no-lag`` rebuilds the
+interface preconditioner at every Newton step (``sc.Subdomains(lag=False)``; kept by default);
 ``--no-monolithic`` leaves the monolithic Newton out where it does not fit; ``--history`` prints
 each Newton's iterates, ``--progress`` a line per iterate as it comes; ``--gamg`` also runs the
 monolithic Newton with GMRES + a field split of GAMG (``sc.FIELDSPLIT_GAMG``, stopping at
@@ -67,8 +67,8 @@ parser.add_argument(
     "3D body whose largest front exceeds scene.FRONT_ABOVE DOFs",
 )  # fmt: skip
 parser.add_argument(
-    "--lag", action="store_true",
-    help="keep the interface preconditioner where bodies are by the sweep too (lag=True)",
+    "--no-lag", action="store_true",
+    help="rebuild the interface preconditioner at every Newton step (lag=False)",
 )  # fmt: skip
 parser.add_argument("--history", action="store_true", help="print each Newton's history")
 parser.add_argument("--progress", action="store_true", help="a line per Newton iterate")
@@ -177,7 +177,7 @@ for size in args.sizes:
     else:
         scene = blocks_row_scene(args.count, size, comm=comm, placement=placement)
         sub, sub_seconds, sub_memory, dofs, difference = newton(
-            scene, sc.Subdomains(lag=True if args.lag else None), reference, args.bodies
+            scene, sc.Subdomains(lag=not args.no_lag), reference, args.bodies
         )
     if comm.rank == 0 and sub is not None:
         total = sum(v for k, v in dofs.items() if k != "masters")

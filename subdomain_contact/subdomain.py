@@ -160,12 +160,22 @@ FLOOR_ACCEPTED = 100.0
 
 #: A kept (lagged) preconditioner is rebuilt after a solve that needed more than this many
 #: times the interface Krylov iterations of its reference solve (plus one): the first solve
-#: after its build (one that went on from a stopped solve counts at least the old reference).
+#: after its build (one that went on from a stopped solve counts at least the last solve that
+#: began with a new build).
 #: Rebuilding costs a factorisation of the strip and one application of ``S`` per coarse
 #: mode (up to 8 per body), each application a solve of every body the mode touches: on
 #: four 3D blocks with iterative bodies (T, φ, u) that was 3.9 s per Newton step against
 #: 1.6 s for the whole interface solve.
 LAG_GROWTH = 2.0
+
+#: Kept builds found stale one after another (a solve stopped by :data:`LAG_GROWTH`'s limit,
+#: or slowed past it) after which the preconditioner is rebuilt at every set-up for the
+#: solver's life: where the Jacobian moves too far between steps for any kept build to
+#: serve, keeping only adds a stopped solve and a round to every step. The collector bar
+#: slot at 34,510 DOFs (its block by the sweep, 2 ranks, ``lag=True``) found every kept build
+#: stale from its fifth step on (fresh builds 4-14 Krylov iterations, kept 48-99); the row
+#: of four 3D blocks at 74,580 DOFs never two in a row (13 steps, 5 builds).
+STALE_IN_A_ROW = 2
 
 
 @dataclass(frozen=True)
@@ -201,32 +211,29 @@ class Subdomains:
             several interfaces, floats, is solved iteratively or is spread with many master
             DOFs (above), else the fixed point.
         coarse: Add the coarse correction to the Krylov preconditioner.
-        lag: ``None`` (the default): where some body is solved by AMG, keep the interface
-            Krylov's preconditioner (the strip's factorisation, the coarse matrix, whose columns
-            cost iterative body solves) from one set-up to the next (Newton steps, time
-            steps) while it serves: it is rebuilt when the active master DOFs change, and
-            at once when a Krylov solve with it needs more than :data:`LAG_GROWTH` times the
-            iterations of its reference solve (the first after the build), the stopped
-            solve then going on from its iterate with the new build, unless its strip's new
-            factorisation would not fit in the memory left (kept then, and counted in
-            ``kept_for_memory``; where a rebuild is needed, a ``MemoryError`` says so before
-            the system kills a rank). It only preconditions: the true rounds use the current
-            bodies. With factorised bodies the rebuild costs less than the rounds and
-            iterations a kept one adds (the collector bar slot at 17k DOFs, 18 Newton
-            steps: 51.5 s rebuilt at every step, 58.5 s kept; four 3D blocks at 31k DOFs:
-            25.6 s and 29.2 s; the slot nested to 174,240 DOFs, 2 ranks: 486.3 s and
-            530.5 s, 3 strip factorisations saved and 5 rounds added), so there it is
-            rebuilt every time; likewise with bodies solved by the factorised sweep (the
-            slot nested to 174,240 DOFs, its block so solved, 2 ranks: 295.7 s rebuilt
-            against 347.4 s kept on the fine level, 92.0 s against 177.8 s on 34,510; at
-            34,510 alone on 2026-12-07: 36.0 s against 76.5 s). ``True``: kept also where
-            the iterative bodies are by the sweep, which pays where the kept preconditioner
-            serves across Newton steps and a build is dear: the row of four 3D blocks,
-            every block by the sweep, the inner two floating (their modes' coarse columns
-            are the build's body solves), 2 ranks, one run each: 1,442.2 s against 1,683.4
-            s rebuilt at 1.01M DOFs, 34.4 s against 37.7 s at 74,580
-            (``bench_3d_bodies.py --bodies split --lag``). ``False``: rebuilt at every
-            set-up.
+        lag: Where some body is solved iteratively (by AMG or by the factorised sweep),
+            keep the interface Krylov's preconditioner (the strip's factorisation, the coarse
+            matrix, whose columns cost iterative body solves) from one set-up to the next
+            (Newton steps, time steps) while it serves: it is rebuilt when the active master
+            DOFs change, and at once when a Krylov solve with it needs more than
+            :data:`LAG_GROWTH` times the iterations of its reference solve (the first after
+            the build), the stopped solve then going on from its iterate with the new build,
+            unless its strip's new factorisation would not fit in the memory left (kept
+            then, and counted in ``kept_for_memory``; where a rebuild is needed, a
+            ``MemoryError`` says so before the system kills a rank); after
+            :data:`STALE_IN_A_ROW` kept builds found stale one after another it is rebuilt
+            at every set-up. It only preconditions: the true rounds use the current bodies.
+            With factorised bodies the rebuild costs less than the rounds and iterations a
+            kept one adds (the collector bar slot at 17k DOFs, 18 Newton steps: 51.5 s
+            rebuilt at every step, 58.5 s kept; four 3D blocks at 31k DOFs: 25.6 s and
+            29.2 s; the slot nested to 174,240 DOFs, 2 ranks: 486.3 s and 530.5 s, 3 strip
+            factorisations saved and 5 rounds added), so there it is rebuilt every time.
+            With bodies by the sweep (2 ranks, 2026-12-07): the row of four 3D blocks
+            (``bench_3d_bodies.py``), 609.8 s kept against 701.7 s rebuilt at 1.01M DOFs
+            (the monolithic field split 624.7 and 610.4 s in the same runs), 21.5 s against
+            25.0 s at 74,580; the collector bar slot at 34,510 DOFs, its block by the sweep,
+            32.1 s against 34.3 s (kept until its third step, then stale twice in a row;
+            79.4 s before :data:`STALE_IN_A_ROW`). ``False``: rebuilt at every set-up.
         dense_limit: A body with more master DOFs than this applies ``S^α`` by a body solve
             instead of a dense matrix. By default a body condensed on its contact DOFs
             forms it (from its Schur block, or a thin body by multi-column solves), and
@@ -246,7 +253,7 @@ class Subdomains:
         *,
         krylov: bool | None = None,
         coarse: bool = True,
-        lag: bool | None = None,
+        lag: bool = True,
         dense_limit: int | None = None,
         max_rounds: int = 100,
         max_refinements: int = 5,
@@ -259,6 +266,8 @@ class Subdomains:
         self.lag = lag
         self._built: dict | None = None  # what the kept preconditioner was built for
         self._lagged = False  # whether this set-up kept it
+        self._stale_in_a_row = 0  # kept builds found stale one after another
+        self._fresh = 0  # iterations of the last solve that began with a new build
         self.max_rounds, self.max_refinements = max_rounds, max_refinements
         self.divergence, self.prefix, self.monitor = divergence, prefix, monitor
         self._body_rtol = BODY_RTOL_FACTOR * Tolerance().rtol
@@ -336,10 +345,11 @@ class Subdomains:
         weigh = self.use_krylov and iterative and not system.symmetric
         weigh = weigh and "displacement" in system.problem.fields
         self.error_weights = self._error_weights() if weigh else None
-        kept_for = any(b.iterative and (self.lag or not b.split) for b in system.bodies.values())
+        kept_for = any(b.iterative for b in system.bodies.values())  # a build's Krylov solves
         kept_for = system.comm.allreduce(kept_for, op=MPI.LOR)
-        lag = self.lag is not False and self.use_krylov and kept_for  # a build's Krylov solves
-        self._lagged = lag and kept and not self._built["stale"]
+        lag = self.lag and self.use_krylov and kept_for
+        tired = self._stale_in_a_row >= STALE_IN_A_ROW  # kept builds stopped serving
+        self._lagged = lag and kept and not self._built["stale"] and not tired
         if lag and kept and not self._lagged and not self._room_for_strip():
             self._lagged = True  # slower, but a new factorisation of the strip would not fit
         if not self._lagged:
@@ -852,16 +862,17 @@ class Subdomains:
 
     def _solve_krylov_kept(self, b: Vector | None, tolerance: Tolerance, result) -> Vector:
         """The interface Krylov solve; with a kept preconditioner, rebuilt if it fails or slows."""
-        before, continued, reference = 0, False, None
+        before, continued = 0, False
+        kept = self._lagged
         try:
             y = self._solve_krylov(b, tolerance, result)
         except SubdomainConvergenceError as error:
             if not self._lagged:
                 raise
+            self._stale_in_a_row += 1
             before = len(result.krylov_iterations)
             slowed = self._iteration_limit() < self.max_rounds  # it stopped at the limit
             if not (slowed and not self._room_for_strip()):
-                reference = self._built["iterations"]
                 self._build_preconditioner()  # for the current bodies, then once more
                 continued = error.iterate is not None
             # A solve stopped at the limit goes on from where it stopped, not from zero: on
@@ -871,16 +882,24 @@ class Subdomains:
         built, iterations = self._built, sum(result.krylov_iterations[before:])
         if continued:
             # A solve that went on from a stopped one with the new build started
-            # part-converged: the new reference is the larger of its count and the old
-            # one, and it does not judge the build it has just made stale. (Kept with
-            # the old reference alone, the row of four blocks rebuilt it at the next step,
-            # 74,580 DOFs on 2 ranks: 77 -> 97 s; left without a reference, a stale
-            # build ran 100 iterations unchecked at 219k: 199 s.)
-            built["iterations"] = max(iterations, reference or 0)
+            # part-converged: the new build's reference is the larger of its count and
+            # that of the last solve that began with a new build, and it does not judge
+            # the build it has just made stale. (Kept with the old reference alone, the
+            # row of four blocks rebuilt it at the next step, 74,580 DOFs on 2 ranks: 77
+            # -> 97 s; left without a reference, a stale build ran 100 iterations
+            # unchecked at 219k: 199 s; the larger of its count and the old reference,
+            # until 2026-12-07, ratcheted up on the collector bar slot's hard steps to 64
+            # or more, so that its kept solves ran 100 iterations before each rebuild; its
+            # count alone, 0 where the true round after the rebuild met the tolerance,
+            # stopped the row's next kept solve at its first iteration.)
+            built["iterations"] = max(iterations, self._fresh)
         elif built["iterations"] is None:
-            built["iterations"] = iterations
+            built["iterations"] = self._fresh = iterations
         elif iterations > LAG_GROWTH * built["iterations"] + 1:
             built["stale"] = True
+            self._stale_in_a_row += 1
+        elif kept:
+            self._stale_in_a_row = 0  # a kept build served
         return y
 
     def _solve_krylov(
