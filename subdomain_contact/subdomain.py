@@ -174,7 +174,7 @@ LAG_GROWTH = 2.0
 #: serve, keeping only adds a stopped solve and a round to every step. The collector bar
 #: slot at 34,510 DOFs (its block by the sweep, 2 ranks, ``lag=True``) found every kept build
 #: stale from its fifth step on (fresh builds 4-14 Krylov iterations, kept 48-99); the row
-#: of four 3D blocks at 74,580 DOFs never two in a row (13 steps, 5 builds).
+#: of four 3D blocks at 74,580 DOFs never two in a row (13 steps, 4 builds).
 STALE_IN_A_ROW = 2
 
 
@@ -229,8 +229,8 @@ class Subdomains:
             29.2 s; the slot nested to 174,240 DOFs, 2 ranks: 486.3 s and 530.5 s, 3 strip
             factorisations saved and 5 rounds added), so there it is rebuilt every time.
             With bodies by the sweep (2 ranks, 2026-12-07): the row of four 3D blocks
-            (``bench_3d_bodies.py``), 609.8 s kept against 701.7 s rebuilt at 1.01M DOFs
-            (the monolithic field split 624.7 and 610.4 s in the same runs), 21.5 s against
+            (``bench_3d_bodies.py``), 632.2 s kept against 701.7 s rebuilt at 1.01M DOFs
+            (the monolithic field split 628.0 and 610.4 s in the same runs), 21.5 s against
             25.0 s at 74,580; the collector bar slot at 34,510 DOFs, its block by the sweep,
             32.1 s against 34.3 s (kept until its third step, then stale twice in a row;
             79.4 s before :data:`STALE_IN_A_ROW`). ``False``: rebuilt at every set-up.
