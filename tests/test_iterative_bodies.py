@@ -665,7 +665,8 @@ def test_kept_builds_stale_twice_in_a_row_are_rebuilt_at_every_set_up_after(comm
     linear = sc.Subdomains()
     monolithic, result, errors, _ = row_against_monolithic(comm, linear)
     stopped = [s for _, s in events]
-    tired = next(i for i in range(1, len(stopped)) if stopped[i - 1] and stopped[i])
+    tired = next((i for i in range(1, len(stopped)) if stopped[i - 1] and stopped[i]), None)
+    assert tired is not None, events  # two kept builds stopped in a row
     assert not any(kept for kept, _ in events[tired + 1 :])
     assert tired + 1 < len(events)  # set-ups after it, rebuilt
     assert result.iterations <= monolithic.iterations + 1
