@@ -36,7 +36,7 @@ factorised (:data:`FACTORISED_SWEEP`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from types import MappingProxyType
 
 import dolfinx
@@ -58,8 +58,11 @@ from subdomain_contact.solvers import (
     DIRECT,
     THERMOELECTRIC_MECHANICAL,
     RowScaledKrylov,
+    columns_apply,
+    columns_mult,
     destroy,
     factorise,
+    fgmres_columns,
     fits_freed,
     make_ksp,
     ordered,
@@ -172,6 +175,11 @@ FIELD_REFINEMENTS = 3
 
 #: Memory of the right-hand sides that a body's multi-column solve holds at once [bytes].
 COLUMN_BYTES = 64 * 2**20
+
+#: Fewest iterations between restarts of a split body's FGMRES on several columns at once
+#: (:meth:`Body._column_budget`), and the restarts after which a column goes on alone.
+COLUMN_RESTART = 10
+COLUMN_CYCLES = 4
 
 #: A master DOF whose half-link's row sum is below this fraction of the bulk's takes the
 #: link form of its residual even where its interface's other DOFs take the reaction form
@@ -816,11 +824,11 @@ class Body:
         return self._scaled_residual(residual, self._local_scales(rhs, y, dofs_of), dofs_of)
 
     def _local_scales(self, rhs: Matrix, y: Matrix, dofs_of: list) -> Vector:
-        """Each field's ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` on this rank's ``dofs_of`` (by field)."""
+        """Each field's ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` on this rank's ``dofs_of`` (fields × columns)."""
         return np.array(
             [
-                np.abs(rhs[dofs]).max(initial=0.0)
-                + self._bulk_norms[f] * np.abs(y[dofs]).max(initial=0.0)
+                np.abs(rhs[dofs]).max(axis=0, initial=0.0)
+                + self._bulk_norms[f] * np.abs(y[dofs]).max(axis=0, initial=0.0)
                 for f, dofs in enumerate(dofs_of)
             ]
         )
@@ -849,6 +857,8 @@ class Body:
         return out
 
     def _solve_whole(self, rhs: Vector) -> Vector:
+        if self.split:
+            return self._solve_split(rhs[:, None])[:, 0]
         y = self._krylov(rhs)
         if self.iterative and len(self.forms.fields) > 1:
             # The Krylov test's norm mixes fields of units K, V and m: a field of small
@@ -858,24 +868,107 @@ class Body:
             # a tenth of the shortfall only: a refinement to the full tolerance repeated
             # the whole reduction on the residual (the row of four blocks at 31k DOFs: 36,
             # 26 and 14 iterations per refinement where 9, 7 and 7 suffice, the same count
-            # of refinements; body Krylov 32.8 s → 27.1 s, 13 Newton steps both). A split
-            # body's FGMRES already weighs each field's rows by a scale (:meth:`_krylov`),
-            # and its fields are measured against the larger of that and their own.
-            target = max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
-            for refinement in range(FIELD_REFINEMENTS + 1):
+            # of refinements; body Krylov 32.8 s → 27.1 s, 13 Newton steps both).
+            target = self._target()
+            for _ in range(FIELD_REFINEMENTS):
                 residual = rhs - self._apply_A(y)
-                if self.split:
-                    scales = np.maximum(self._field_scales(rhs, y), self._solved_scales)
-                    shortfall = self._scaled_residual(residual, scales) / target
-                else:
-                    shortfall = self._field_residual(residual, rhs, y) / target
-                if shortfall <= 1.0 or refinement == FIELD_REFINEMENTS:
+                shortfall = self._field_residual(residual, rhs, y) / target
+                if shortfall <= 1.0:
                     break
-                rtol = max(target, 0.1 / shortfall)
-                y += self._krylov(residual, rtol, scales if self.split else None)
-            if shortfall > 1.0 and self._may_double and self._sweep_in_double():
-                return self._solve_whole(rhs)
+                y += self._krylov(residual, max(target, 0.1 / shortfall))
         return y
+
+    def _target(self) -> float:
+        """Each field's tolerance of an iterative solve, relative to its scale."""
+        return max(self.ksp.getTolerances()[0], 1e3 * np.finfo(float).eps)
+
+    def _solve_split(self, rhs: Matrix) -> Matrix:
+        """A split body's solves of ``A Y = rhs`` (owned rows × columns), every column at once.
+
+        Each field's residual is measured against its own scale and a short column refined,
+        as :meth:`_solve_whole`'s; a field is measured against the larger of its own scale and
+        the one its column's FGMRES weighed it by (:meth:`_weigh`). A sweep in single
+        precision still short after :data:`FIELD_REFINEMENTS` is factorised again in double
+        (:meth:`_sweep_in_double`) and every column solved again.
+        """
+        target = self._target()
+        y, solved = self._sweep_columns(rhs, np.full(rhs.shape[1], None), None)
+        for refinement in range(FIELD_REFINEMENTS + 1):
+            residual = rhs - self._apply_columns(y)
+            scales = np.maximum(self._field_scales(rhs, y), solved)
+            shortfall = self._scaled_residual(residual, scales) / target
+            short = shortfall > 1.0
+            if not short.any() or refinement == FIELD_REFINEMENTS:
+                break
+            rtol = np.maximum(target, 0.1 / shortfall[short])
+            dy, solved[:, short] = self._sweep_columns(residual[:, short], rtol, scales[:, short])
+            y[:, short] += dy
+        if short.any() and self._may_double and self._sweep_in_double():
+            return self._solve_split(rhs)
+        return y
+
+    def _apply_columns(self, y: Matrix) -> Matrix:
+        """``A y`` for columns on the owned DOFs (:meth:`_apply_A`).
+
+        By one product where the whole matrix is built for this state.
+        """
+        if y.shape[1] > 1 and self._A is not None and self._whole_step == self._step:
+            return columns_mult(self._A, y)
+        return np.column_stack([self._apply_A(column) for column in y.T])
+
+    def _sweep_columns(
+        self, rhs: Matrix, rtol: Sequence[float | None], scales: Matrix | None
+    ) -> tuple[Matrix, Matrix]:
+        """A split body's FGMRES on every column of ``rhs``, its rows weighed by field.
+
+        ``rtol``: each column's (None: the body's); ``scales``: each field's (rows) scale
+        per column, or None for the fields' scales of ``rhs`` and one sweep on it
+        (:meth:`_weigh`). Several columns go together (:func:`~subdomain_contact.solvers.
+        fgmres_columns`) while the sweep solves, one by one by :meth:`_krylov` once MUMPS
+        has taken the body; a column that does not meet its tolerance together is solved
+        again alone, by :meth:`_krylov` and its ways out. Returns the solutions and the scales
+        each column was weighed by.
+        """
+        m = rhs.shape[1]
+        y, solved = np.empty_like(rhs), np.empty((len(self._field_dofs), m))
+        if m == 1 or self._direct is not None:
+            for j in range(m):
+                column = None if scales is None else scales[:, j]
+                y[:, j] = self._krylov(rhs[:, j], rtol[j], column)
+                solved[:, j] = self._solved_scales
+            return y, solved
+        pc = self.ksp.getPC()
+        first = columns_apply(pc, rhs)
+        weights = np.empty_like(rhs)
+        for j in range(m):
+            column = None if scales is None else scales[:, j]
+            weights[:, j] = self._weigh(rhs[:, j], first[:, j], column)
+            solved[:, j] = self._solved_scales
+        own = self.ksp.getTolerances()[0]
+        tolerances = np.array([own if r is None else r for r in rtol], dtype=float)
+        restart, max_it = self._column_budget(m)
+        y, iterations, met = fgmres_columns(
+            self._A, pc, rhs, weights, tolerances, restart, max_it, first
+        )
+        self.solve_iterations += int(iterations.sum())
+        for j in np.flatnonzero(~met):
+            column = None if scales is None else scales[:, j]
+            y[:, j] = self._krylov(rhs[:, j], rtol[j], column)
+            solved[:, j] = self._solved_scales
+        return y, solved
+
+    def _column_budget(self, columns: int) -> tuple[int, int]:
+        """Restart and iteration cap of FGMRES on ``columns`` at once (:meth:`_sweep_columns`).
+
+        The restart is the body's (``-<prefix>ksp_gmres_restart``) shared among the columns,
+        so that they hold as many vectors as one solve at its restart, but at least
+        :data:`COLUMN_RESTART`; a column still short after :data:`COLUMN_CYCLES` restarts is
+        solved again alone.
+        """
+        key = self.prefix + "ksp_gmres_restart"
+        restart = PETSc.Options().getInt(key, int(self.sweep["ksp_gmres_restart"]))
+        restart = max(COLUMN_RESTART, restart // columns)
+        return restart, min(self.ksp.getTolerances()[3], COLUMN_CYCLES * restart)
 
     def _sweep_in_double(self) -> bool:
         """Factorise the sweep's splits again in double precision, for the body's life.
@@ -930,7 +1023,9 @@ class Body:
                 self._scaled_krylov = RowScaledKrylov(self.ksp, self._A, restart)
             ksp = self._scaled_krylov.ksp
             rtol = self.ksp.getTolerances()[0] if rtol is None else rtol
-            x = self._scaled_krylov.solve(b, lambda b, y: self._weigh(b, y, scales), rtol)
+            x = self._scaled_krylov.solve(
+                b, lambda b, y: self._weigh(b.array_r, y.array_r, scales), rtol
+            )
         else:
             if rtol is not None:
                 kept = ksp.getTolerances()[0]
@@ -964,35 +1059,44 @@ class Body:
             return self._krylov(rhs)
         return self._checked(ksp, x)
 
-    def _field_scales(self, rhs: Vector, y: Vector) -> Vector:
-        """Each field's scale ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (:meth:`_field_residual`), all ranks."""
+    def _field_scales(self, rhs: Matrix, y: Matrix) -> Matrix:
+        """Each field's scale ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (:meth:`_field_residual`), all ranks.
+
+        One per field, or fields × columns for columns.
+        """
         scales = self._local_scales(rhs, y, self._field_dofs)
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, scales, op=MPI.MAX)
         return scales
 
     def _scaled_residual(
-        self, residual: Matrix, scales: Vector, dofs_of: list | None = None
-    ) -> float:
-        """The largest over fields of ``‖r_f‖∞ / scale_f`` (every rank)."""
-        dofs_of = self._field_dofs if dofs_of is None else dofs_of
-        largest = np.array([np.abs(residual[dofs]).max(initial=0.0) for dofs in dofs_of])
-        return self.comm.allreduce((largest / np.maximum(scales, 1e-300)).max(), op=MPI.MAX)
+        self, residual: Matrix, scales: Matrix, dofs_of: list | None = None
+    ) -> float | Vector:
+        """The largest over fields of ``‖r_f‖∞ / scale_f`` (every rank).
 
-    def _weigh(self, rhs: PETSc.Vec, y: PETSc.Vec, scales: Vector | None) -> Vector:
+        Per column for columns (``scales``: fields × columns).
+        """
+        dofs_of = self._field_dofs if dofs_of is None else dofs_of
+        largest = np.array([np.abs(residual[dofs]).max(axis=0, initial=0.0) for dofs in dofs_of])
+        worst = np.atleast_1d((largest / np.maximum(scales, 1e-300)).max(axis=0))
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
+        return worst if residual.ndim > 1 else float(worst[0])
+
+    def _weigh(self, rhs: Vector, y: Vector, scales: Vector | None) -> Vector:
         """Each owned row's weight in a split body's FGMRES: ``1 / scale`` of its field.
 
         ``scales`` where given, else :meth:`_field_scales` with ``y`` an estimate of the
         solution (one sweep on ``rhs``). A field of zero scale takes the largest weight of
         the others (1 where every scale is zero). The scales are kept (``_solved_scales``) for
-        the solve's own test (:meth:`_solve_whole`): a field whose solution is the round-off
+        the solve's own test (:meth:`_solve_split`): a field whose solution is the round-off
         of the others (the potential of a column with no current, 1e-17 where its sweep gave
         1e-3) is measured against the scale it was solved to, not its own, which FGMRES
         drives down with it (the row at 218,790 DOFs: 2.5e10 times short by its own, its
         refinements 2,211 iterations, then the sweep doubled and MUMPS).
         """
         if scales is None:
-            scales = self._field_scales(rhs.array_r, y.array_r)
+            scales = self._field_scales(rhs, y)
         weights = np.divide(1.0, scales, out=np.zeros_like(scales), where=scales > 0)
         weights[scales == 0] = weights.max(initial=0.0) or 1.0
         self._solved_scales = 1.0 / weights
@@ -1167,8 +1271,15 @@ class Body:
         """Body solves for right-hand sides on the contact DOFs: ``y_s`` and ``(A_bulk y)_s``.
 
         A body factorised on one rank solves many columns at once (``MatMatSolve``, in
-        blocks of :data:`COLUMN_BYTES`); otherwise one solve per column.
+        blocks of :data:`COLUMN_BYTES`), a split body by FGMRES on every column at once
+        (:meth:`_solve_split`); otherwise one solve per column.
         """
+        if self.split and rhs_s.shape[1] > 1:
+            rhs = np.zeros((self.size, rhs_s.shape[1]))
+            rhs[self.kept_local] = rhs_s[self.kept_slice]
+            y = self._solve_split(rhs)
+            Ay = columns_mult(self.A_bulk, y)
+            return self._gather_kept(y[self.kept_local]), self._gather_kept(Ay[self.kept_local])
         if self.iterative or self.comm.size > 1 or rhs_s.shape[1] == 1:
             return self._solve_each_column(rhs_s)
         factor = self.ksp.getPC().getFactorMatrix()

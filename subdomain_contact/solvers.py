@@ -6,6 +6,7 @@ from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 
 import numpy as np
+import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -21,10 +22,13 @@ __all__ = [
     "THERMOELECTRIC_MECHANICAL",
     "RowScaledKrylov",
     "available_memory",
+    "columns_apply",
+    "columns_mult",
     "default_option",
     "destroy",
     "factorisation_memory",
     "factorise",
+    "fgmres_columns",
     "fits_freed",
     "make_ksp",
     "node_memory",
@@ -369,6 +373,136 @@ class RowScaledKrylov:
     def destroy(self) -> None:
         """Free its PETSc objects (not ``ksp``'s)."""
         destroy(self.ksp, self.operator, self.d, self.x, self.b, self.first)
+
+
+def _dense(values: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
+    """Columns on ``A``'s owned rows as a dense PETSc matrix of A's row layout (a copy)."""
+    rows = A.getSizes()[0]
+    return PETSc.Mat().createDense(
+        (rows, (PETSc.DECIDE, values.shape[1])), array=np.asfortranarray(values), comm=A.getComm()
+    )
+
+
+def columns_mult(A: PETSc.Mat, X: np.ndarray) -> np.ndarray:
+    """``A X`` for columns ``X`` on A's owned rows (one sparse-dense product)."""
+    B = _dense(X, A)
+    P = A.matMult(B)
+    out = P.getDenseArray(readonly=True).copy()
+    destroy(B, P)
+    return out
+
+
+def columns_apply(pc: PETSc.PC, X: np.ndarray) -> np.ndarray:
+    """``M⁻¹ X``, a set-up preconditioner applied to every column at once.
+
+    ``PCMatApply``: a factorisation's ``MatMatSolve``, for a field split one block sweep.
+    """
+    A = pc.getOperators()[1]
+    B = _dense(X, A)
+    Y = B.duplicate()
+    pc.matApply(B, Y)
+    out = Y.getDenseArray(readonly=True).copy()
+    destroy(B, Y)
+    return out
+
+
+def fgmres_columns(
+    A: PETSc.Mat,
+    pc: PETSc.PC,
+    b: np.ndarray,
+    weights: np.ndarray,
+    rtol: np.ndarray,
+    restart: int,
+    max_it: int,
+    first: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:class:`RowScaledKrylov` on every column of ``A X = B`` at once, in lockstep.
+
+    Column j is solved by its own flexible GMRES on ``D_j A x = D_j b_j``, right-preconditioned
+    by ``M⁻¹ D_j⁻¹`` (``D_j = diag(weights[:, j])``), to ``‖D_j (b_j − A x_j)‖₂ ≤ rtol_j
+    ‖D_j b_j‖₂`` by its residual estimate (FGMRES's is the true one to round-off: the
+    residual is never computed from a preconditioned vector); but each iteration applies
+    ``M⁻¹`` to every column still going in one call (:func:`columns_apply`), and ``A`` in one
+    product. A factorised sweep's triangular solves on several right-hand sides cost little
+    more than on one (MUMPS's MatMatSolve, BLAS 3): on the row of four 3D blocks, 5-8 coarse
+    columns a third of a sweep each. PETSc's ``KSPMatSolve`` has a method of its own for
+    several columns only in HPDDM (not in this build); otherwise it solves them one by one.
+    Gram-Schmidt: classical, twice (each column's basis stays orthogonal to round-off). A
+    column whose estimate has not met its tolerance after ``restart`` iterations restarts
+    from its true residual, up to ``max_it`` iterations in all.
+
+    ``b``, ``weights``: owned rows × columns; ``first``: ``M⁻¹ b``, computed by the caller for
+    the weights (the first application). Returns ``X``, each column's iteration count, and
+    whether it met its tolerance.
+    """
+    comm = A.getComm().tompi4py()
+
+    def summed(values: np.ndarray) -> np.ndarray:
+        if comm.size > 1:
+            comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
+        return values
+
+    def norms(V: np.ndarray) -> np.ndarray:
+        return np.sqrt(summed(np.einsum("nc,nc->c", V, V)))
+
+    n, m = b.shape
+    x, iterations = np.zeros((n, m)), np.zeros(m, dtype=np.int64)
+    target = rtol * norms(weights * b)
+    met = target == 0.0  # a zero right-hand side: x = 0
+    going, start = ~met, True
+    while going.any():
+        cols = np.flatnonzero(going)
+        D = weights[:, cols]
+        r = D * (b[:, cols] if start else b[:, cols] - columns_mult(A, x[:, cols]))
+        beta = norms(r)
+        if not start:  # the true residual met the tolerance at the restart
+            met[cols[beta <= target[cols]]] = True
+            going &= ~met
+            keep = beta > target[cols]
+            cols, D, r, beta = cols[keep], D[:, keep], r[:, keep], beta[keep]
+            if not cols.size:
+                break
+        mc = cols.size
+        V, Z = np.empty((restart + 1, n, mc)), np.empty((restart, n, mc))
+        H, g = np.zeros((restart + 1, restart, mc)), np.zeros((restart + 1, mc))
+        cs, sn = np.zeros((restart, mc)), np.zeros((restart, mc))
+        V[0], g[0] = r / beta, beta
+        on, steps = np.ones(mc, dtype=bool), np.zeros(mc, dtype=np.int64)
+        for k in range(restart):
+            c = np.flatnonzero(on)
+            if not c.size:
+                break
+            if start and k == 0:  # V₀ = D b / β: M⁻¹ D⁻¹ V₀ = M⁻¹ b / β
+                Z[0] = first[:, cols] / beta
+            else:
+                Z[k][:, c] = columns_apply(pc, V[k][:, c] / D[:, c])
+            w = D[:, c] * columns_mult(A, Z[k][:, c])
+            for _ in range(2):
+                h = summed(np.einsum("jnc,nc->jc", V[: k + 1][:, :, c], w))
+                w -= np.einsum("jnc,jc->nc", V[: k + 1][:, :, c], h)
+                H[: k + 1, k, c] += h
+            H[k + 1, k, c] = norms(w)
+            V[k + 1][:, c] = w / np.where(H[k + 1, k, c] > 0, H[k + 1, k, c], 1.0)
+            for i in range(k):  # the earlier rotations, then this one
+                upper, lower = H[i, k, c], H[i + 1, k, c]
+                H[i, k, c] = cs[i, c] * upper + sn[i, c] * lower
+                H[i + 1, k, c] = -sn[i, c] * upper + cs[i, c] * lower
+            rho = np.hypot(H[k, k, c], H[k + 1, k, c])
+            cs[k, c], sn[k, c] = H[k, k, c] / rho, H[k + 1, k, c] / rho
+            H[k, k, c], H[k + 1, k, c] = rho, 0.0
+            g[k + 1, c], g[k, c] = -sn[k, c] * g[k, c], cs[k, c] * g[k, c]
+            steps[c] += 1
+            iterations[cols[c]] += 1
+            done = np.abs(g[k + 1, c]) <= target[cols[c]]
+            met[cols[c[done]]] = True
+            on[c[done | (iterations[cols[c]] >= max_it)]] = False
+        for i, j in enumerate(cols):
+            kk = steps[i]
+            y = scipy.linalg.solve_triangular(H[:kk, :kk, i], g[:kk, i])
+            x[:, j] += Z[:kk, :, i].T @ y
+        going &= ~met & (iterations < max_it)
+        start = False
+    return x, iterations, met
 
 
 def factorise(

@@ -338,6 +338,60 @@ def test_fgmres_keeps_the_true_residual_where_the_preconditioner_is_in_single_pr
     destroy(ksp, A, b, x, r)
 
 
+def test_fgmres_on_several_columns_at_once_takes_each_columns_own_path(comm):
+    """``fgmres_columns`` is ``RowScaledKrylov`` on each column, with one application of the
+    preconditioner to every column still going per iteration. On the chain of springs above
+    (3,000, tied by 1e-2 at one end, spread over the ranks; LU in single precision by MUMPS),
+    three right-hand sides with their own row weights (one field at 1, the other at 1e3, or
+    the reverse) and tolerances, and a zero column, at a restart of 2 (restarts from the true
+    residual): each column takes FGMRES's iteration count alone, but for one iteration where
+    an estimate lands within round-off of its threshold (Gram-Schmidt in other orders: CGS
+    twice here, refined if needed in PETSc), and meets its tolerance on the true weighted
+    residual, plus the round-off of computing ``A x`` (as above: ``3 ε ‖D‖∞ ‖A‖∞ ‖x‖``)."""
+    n, rtols = 3000, np.array([1e-12, 1e-8, 1e-10, 1e-12])
+    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=comm)
+    start, stop = A.getOwnershipRange()
+    for i in range(start, stop):
+        A.setValue(i, i, 2.0 if 0 < i < n - 1 else 1.0 + (1e-2 if i == 0 else 0.0))
+        if i > 0:
+            A.setValue(i, i - 1, -1.0)
+        if i < n - 1:
+            A.setValue(i, i + 1, -1.0)
+    A.assemble()
+    options = dict(DIRECT) | {"pc_precision": "single", "ksp_rtol": "1e-12"}
+    ksp = make_ksp(A, "test_columns_", options)
+    rows = np.arange(start, stop)
+    b = np.random.default_rng(1).standard_normal((n, 4))[rows]
+    b[:, 3] = 0.0
+    weights = np.ones((rows.size, 4))
+    weights[rows >= n // 2, 0] = 1e3
+    weights[rows < n // 2, 1] = 1e3
+    first = solvers_module.columns_apply(ksp.getPC(), b)
+    x, iterations, met = solvers_module.fgmres_columns(
+        A, ksp.getPC(), b, weights, rtols, 2, 1000, first
+    )
+    assert met.all() and iterations[3] == 0 and not x[:, 3].any()
+    ax = solvers_module.columns_mult(A, x)
+
+    def weighed_norm(values):
+        return np.sqrt(comm.allreduce(values @ values))
+
+    scaled = RowScaledKrylov(ksp, A, 2)
+    vector = A.createVecRight()
+    for j in range(3):
+        vector.array[:] = b[:, j]
+        scaled.solve(vector, lambda rhs, estimate, j=j: weights[:, j], rtols[j])
+        assert scaled.ksp.getConvergedReason() > 0
+        assert abs(iterations[j] - scaled.ksp.getIterationNumber()) <= 1
+        assert iterations[j] > 2  # restarted
+        residual = weighed_norm(weights[:, j] * (b[:, j] - ax[:, j]))
+        largest = comm.allreduce(np.abs(x[:, j]).max(), op=MPI.MAX)
+        floor = 3 * np.finfo(float).eps * 1e3 * 4.0 * largest * np.sqrt(n)
+        assert residual <= rtols[j] * weighed_norm(weights[:, j] * b[:, j]) + floor
+    scaled.destroy()
+    destroy(ksp, A, vector)
+
+
 def test_the_floating_blocks_sweeps_meet_their_tolerance_in_single_precision(comm):
     """The row at 18,495 DOFs (31,420 on 2 ranks), every body by the sweep. The floating
     blocks' displacement splits near single precision's reach (only the contact ties resist
@@ -373,16 +427,16 @@ def test_a_sweep_short_in_single_precision_is_factorised_again_in_double(comm, m
     simulated: block 1's field residuals are reported 1e6 times their value while its
     sweep is in single precision (above FIELD_REFINEMENTS' reach: each refinement asks a
     tenth of the shortfall)."""
-    scaled_residual, solve_whole, solving = (
+    scaled_residual, solve_split, solving = (
         body_module.Body._scaled_residual,
-        body_module.Body._solve_whole,
+        body_module.Body._solve_split,
         [],
     )
 
     def solve(body, rhs):  # the solve's own test only (not a mode's, Body.respond_by)
         solving.append(body.name == "block_1")
         try:
-            return solve_whole(body, rhs)
+            return solve_split(body, rhs)
         finally:
             solving.pop()
 
@@ -391,7 +445,7 @@ def test_a_sweep_short_in_single_precision_is_factorised_again_in_double(comm, m
         single = body.sweep is not FACTORISED_SWEEP_DOUBLE
         return value * 1e6 if solving and solving[-1] and single else value
 
-    monkeypatch.setattr(body_module.Body, "_solve_whole", solve)
+    monkeypatch.setattr(body_module.Body, "_solve_split", solve)
     monkeypatch.setattr(body_module.Body, "_scaled_residual", reported)
     doubled = {}
 
