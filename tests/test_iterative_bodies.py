@@ -296,6 +296,20 @@ def test_coupled_newton_with_bodies_solved_by_the_factorised_sweep_equals_monoli
     assert max(errors) <= 1e-11
 
 
+def spring_chain(n: int, comm) -> PETSc.Mat:
+    """The stiffness of ``n`` unit springs in a chain, tied to the ground by 1e-2 at one end."""
+    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=comm)
+    start, stop = A.getOwnershipRange()
+    for i in range(start, stop):
+        A.setValue(i, i, 2.0 if 0 < i < n - 1 else 1.0 + (1e-2 if i == 0 else 0.0))
+        if i > 0:
+            A.setValue(i, i - 1, -1.0)
+        if i < n - 1:
+            A.setValue(i, i + 1, -1.0)
+    A.assemble()
+    return A
+
+
 def test_fgmres_keeps_the_true_residual_where_the_preconditioner_is_in_single_precision():
     """A chain of 4,000 unit springs tied to the ground by 1e-2 at one end (condition about
     1e9), ``A x = b`` to 1e-12 preconditioned by its LU in single precision (MUMPS): GMRES
@@ -306,14 +320,7 @@ def test_fgmres_keeps_the_true_residual_where_the_preconditioner_is_in_single_pr
     computing ``A x`` (3 entries a row: ``3 ε ‖A‖∞ ‖x‖``; measured 1.7e-11 against
     5.4e-11 for ``ε ‖A‖∞ ‖x‖``)."""
     n = 4000
-    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=PETSc.COMM_SELF)
-    for i in range(n):
-        A.setValue(i, i, 2.0 if 0 < i < n - 1 else 1.0 + (1e-2 if i == 0 else 0.0))
-        if i > 0:
-            A.setValue(i, i - 1, -1.0)
-        if i < n - 1:
-            A.setValue(i, i + 1, -1.0)
-    A.assemble()
+    A = spring_chain(n, PETSc.COMM_SELF)
     b = A.createVecRight()
     b.array[:] = np.random.default_rng(0).standard_normal(n)
     options = dict(DIRECT) | {"pc_precision": "single", "ksp_type": "gmres", "ksp_rtol": "1e-12"}
@@ -349,15 +356,8 @@ def test_fgmres_on_several_columns_at_once_takes_each_columns_own_path(comm):
     twice here, refined if needed in PETSc), and meets its tolerance on the true weighted
     residual, plus the round-off of computing ``A x`` (as above: ``3 ε ‖D‖∞ ‖A‖∞ ‖x‖``)."""
     n, rtols = 3000, np.array([1e-12, 1e-8, 1e-10, 1e-12])
-    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=comm)
+    A = spring_chain(n, comm)
     start, stop = A.getOwnershipRange()
-    for i in range(start, stop):
-        A.setValue(i, i, 2.0 if 0 < i < n - 1 else 1.0 + (1e-2 if i == 0 else 0.0))
-        if i > 0:
-            A.setValue(i, i - 1, -1.0)
-        if i < n - 1:
-            A.setValue(i, i + 1, -1.0)
-    A.assemble()
     options = dict(DIRECT) | {"pc_precision": "single", "ksp_rtol": "1e-12"}
     ksp = make_ksp(A, "test_columns_", options)
     rows = np.arange(start, stop)
