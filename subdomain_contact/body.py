@@ -931,11 +931,14 @@ class Body:
         """
         m = rhs.shape[1]
         y, solved = np.empty_like(rhs), np.empty((len(self._field_dofs), m))
+
+        def alone(j: int) -> None:
+            y[:, j] = self._krylov(rhs[:, j], rtol[j], None if scales is None else scales[:, j])
+            solved[:, j] = self._solved_scales
+
         if m == 1 or self._direct is not None:
             for j in range(m):
-                column = None if scales is None else scales[:, j]
-                y[:, j] = self._krylov(rhs[:, j], rtol[j], column)
-                solved[:, j] = self._solved_scales
+                alone(j)
             return y, solved
         pc = self.ksp.getPC()
         first = columns_apply(pc, rhs)
@@ -947,14 +950,13 @@ class Body:
         own = self.ksp.getTolerances()[0]
         tolerances = np.array([own if r is None else r for r in rtol], dtype=float)
         restart, max_it = self._column_budget(m)
-        y, iterations, met = fgmres_columns(
+        together, iterations, met = fgmres_columns(
             self._A, pc, rhs, weights, tolerances, restart, max_it, first
         )
+        y[:] = together  # the columns solved alone below are written into y
         self.solve_iterations += int(iterations.sum())
         for j in np.flatnonzero(~met):
-            column = None if scales is None else scales[:, j]
-            y[:, j] = self._krylov(rhs[:, j], rtol[j], column)
-            solved[:, j] = self._solved_scales
+            alone(j)
         return y, solved
 
     def _column_budget(self, columns: int) -> tuple[int, int]:
