@@ -37,10 +37,10 @@ from subdomain_contact.solvers import (
     destroy,
     factorise,
     fits_freed,
-    make_ksp,
     ordered,
     refactorisation_shortfall,
     refuse_refactorisation,
+    set_up_relaxed,
     sweepable,
 )
 from subdomain_contact.system import System
@@ -392,22 +392,19 @@ class StripSolve:
                 rows = np.flatnonzero(np.isin(field, [FIELDS.index(f) for f in fields]))
                 indices = (first + rows).astype(PETSc.IntType)
                 self.sets.append((name, PETSc.IS().createGeneral(indices, comm=self.comm)))
-            options = ordered(
-                SWEEP_DIRECT, system.problem.scene.dim, self.K.getSize()[0],
-                again=not system.is_linear,
-            )  # fmt: skip
-            self.ksp = make_ksp(self.K, self.prefix, options, splits=self.sets)
-        else:
-            self.ksp.setOperators(self.K)
-            self.ksp.setUp()
+        options = ordered(
+            SWEEP_DIRECT, system.problem.scene.dim, self.K.getSize()[0], again=not system.is_linear
+        )
+        ksp, self.ksp = self.ksp, None  # a KSP made again is destroyed by set_up_relaxed
+        self.ksp, relaxation = set_up_relaxed(self.K, self.prefix, options, ksp, splits=self.sets)
         subs = self.ksp.getPC().getFieldSplitSubKSP()
         for (name, _), sub in zip(self.sets, subs, strict=True):
-            sub.setUp()  # factorised now, not at the first solve: its memory is read next
             reason = sub.getPC().getFailedReason()
             if reason != 0:
                 raise RuntimeError(
                     f"sparse strip corrector: factorisation of its {name} split failed (PETSc "
-                    f"PC reason {reason}); try SparseStrip(split=False)"
+                    f"PC reason {reason}, MUMPS workspace relaxed to {relaxation[name]} %); "
+                    "try SparseStrip(split=False)"
                 )
 
     def narrow(self, system: System, layers: int) -> None:

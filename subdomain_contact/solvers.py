@@ -523,13 +523,8 @@ def factorise(
     ``dim``: the topological dimension of the mesh behind ``A``; ``again``: whether it will be
     factorised again on new values (:func:`ordering`). ``advice``: where given, a new
     factorisation is first weighed against the memory its node has left
-    (:func:`refuse_factorisation`) and refused with this advice.
-
-    While MUMPS's workspace estimate falls short (INFOG(1) = −9, PETSc's FACTOR_OUTMEMORY),
-    it factorises again with the relaxation ICNTL(14) doubled, up to 1600 %: numerical
-    pivoting at a stiff or opening contact delays pivots beyond the analysis's estimate (two
-    3D blocks at h = 1e10 on 2 ranks: 20 % fails, 200 % factorises). ICNTL(14) is set on the
-    factor matrix.
+    (:func:`refuse_factorisation`) and refused with this advice. A workspace that falls
+    short is relaxed (:func:`set_up_relaxed`).
 
     Raises:
         RuntimeError: The factorisation failed otherwise, naming ``what`` and the reason.
@@ -538,30 +533,71 @@ def factorise(
     options = ordered(DIRECT, dim, A.getSize()[0], again=again)
     if ksp is None and advice is not None:
         refuse_factorisation(A, prefix, options, what, advice)
-    if ksp is None:
-        ksp = make_ksp(A, prefix, options)
-    else:
-        ksp.setOperators(A)
-        ksp.setUp()
-    relaxation = 20  # MUMPS's default, in percent
-    while ksp.getPC().getFailedReason() == PETSc.PC.FailedReason.FACTOR_OUTMEMORY:
-        if relaxation >= 1600:
-            break
-        relaxation *= 2
-        ksp.destroy()
-        ksp = make_ksp(A, prefix, options, setup=False)
-        pc = ksp.getPC()
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(14, relaxation)
-        ksp.setUp()
+    ksp, relaxation = set_up_relaxed(A, prefix, options, ksp)
     reason = ksp.getPC().getFailedReason()
     if reason != 0:
         ksp.destroy()
         raise RuntimeError(
             f"{what}: factorisation failed (PETSc PC reason {reason}, MUMPS workspace relaxed "
-            f"to {relaxation} %)"
+            f"to {relaxation['']} %)"
         )
     return ksp
+
+
+#: MUMPS's workspace relaxation ICNTL(14) [%]: its default, and the most
+#: :func:`set_up_relaxed` doubles it to.
+RELAXATION = (20, 1600)
+
+
+def set_up_relaxed(
+    A: PETSc.Mat,
+    prefix: str,
+    options: Mapping[str, str],
+    ksp: PETSc.KSP | None = None,
+    *,
+    splits: Sequence[tuple[str, PETSc.IS]] = (),
+) -> tuple[PETSc.KSP, dict[str, int]]:
+    """A KSP on ``A`` (:func:`make_ksp`), or ``ksp`` set up again on A's values, factorised.
+
+    While MUMPS's workspace estimate falls short on a factorisation (INFOG(1) = −9, PETSc's
+    FACTOR_OUTMEMORY), the KSP's own or a split's, the KSP is made again with that
+    factorisation's relaxation ICNTL(14) doubled, up to :data:`RELAXATION`'s most: numerical
+    pivoting at a stiff or opening contact delays pivots beyond the analysis's estimate (two
+    3D blocks at h = 1e10 on 2 ranks: 20 % fails, 200 % factorises; the thermoelectric split
+    of the collector bar slot's sparse strip failed once in five test runs on 2 ranks).
+
+    Returns:
+        The KSP, whose factorisations' failed reasons are the caller's to read, and the
+        relaxation of each by split name ("" for the KSP's own) [%].
+    """
+    names = [name for name, _ in splits] or [""]
+    relaxation = dict.fromkeys(names, RELAXATION[0])
+    if ksp is None:
+        ksp = make_ksp(A, prefix, options, splits=splits)
+    else:
+        ksp.setOperators(A)
+        set_up(ksp)
+    while True:
+        pcs = (
+            [sub.getPC() for sub in ksp.getPC().getFieldSplitSubKSP()] if splits else [ksp.getPC()]
+        )
+        short = [
+            name
+            for name, pc in zip(names, pcs, strict=True)
+            if pc.getFailedReason() == PETSc.PC.FailedReason.FACTOR_OUTMEMORY
+            and relaxation[name] < RELAXATION[1]
+        ]
+        if not short:
+            return ksp, relaxation
+        for name in short:
+            relaxation[name] = min(2 * relaxation[name], RELAXATION[1])
+        relaxed = {
+            (f"fieldsplit_{name}_" if name else "") + "mat_mumps_icntl_14": str(value)
+            for name, value in relaxation.items()
+            if value > RELAXATION[0]
+        }
+        ksp.destroy()
+        ksp = make_ksp(A, prefix, {**options, **relaxed}, splits=splits)
 
 
 #: A MUMPS factorisation made again on new values needs, beside what stays resident, about the
