@@ -70,6 +70,7 @@ from subdomain_contact.solvers import (
     refactorisation_shortfall,
     refuse_refactorisation,
     set_up,
+    set_up_relaxed,
     sweepable,
 )
 
@@ -288,6 +289,8 @@ class Body:
         #: sweeps factorised again in double precision (:meth:`_sweep_in_double`).
         self.fallbacks = 0
         self._near_null: list[PETSc.Object] = []
+        #: A split body's (T, φ) and u index sets, among ``_near_null`` (:meth:`_sweep_splits`).
+        self._splits: list[tuple[str, PETSc.IS]] = []
         #: Krylov iterations of the body's iterative solves, summed.
         self.solve_iterations = 0
         self._A: PETSc.Mat | None = None
@@ -382,7 +385,8 @@ class Body:
         self._drop_scaled_krylov()
         destroy(self.ksp, self._direct, self.A_bulk, self._A, self._scaled, self._kept_is)
         destroy(*mats, *self._vectors, *self._near_null)
-        self.factor, self.ksp, self._direct, self._A, self._near_null = None, None, None, None, []
+        self.factor, self.ksp, self._direct, self._A = None, None, None, None
+        self._near_null, self._splits = [], []
 
     # -- assembly and factorisation ------------------------------------------------------
     def assemble(self) -> None:
@@ -659,9 +663,11 @@ class Body:
             )
             refuse_refactorisation(self.ksp, self.comm, what, advice)
         self.whole_matrix()
-        if self.ksp is None and self.split:
-            splits = self._sweep_splits()
-            self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=splits)
+        if self.split:  # made, or factorised again, with a short workspace relaxed
+            if self.ksp is None:
+                self._splits = self._sweep_splits()
+            ksp, self.ksp = self.ksp, None  # one made again is destroyed by set_up_relaxed
+            self.ksp, _ = set_up_relaxed(self._A, self.prefix, self.sweep, ksp, splits=self._splits)
         elif self.ksp is None and self.iterative and len(self.forms.fields) > 1:
             options = dict(SPLIT)
             for name in self.forms.fields:
@@ -676,7 +682,7 @@ class Body:
             self.ksp = make_ksp(self._A, self.prefix, options)
         elif self.iterative:
             self.ksp.setOperators(self._A)
-            set_up(self.ksp)  # the sweep's splits factorised now, not at the first solve
+            set_up(self.ksp)  # the fields' splits set up now, not at the first solve
         else:
             what = f"body '{self.name}'"
             again = not self.is_linear
@@ -689,7 +695,7 @@ class Body:
         """Free the body's KSP (its factors) and the index sets it was made with."""
         self._drop_scaled_krylov()
         destroy(self.ksp, *self._near_null)
-        self.ksp, self._near_null = None, []
+        self.ksp, self._near_null, self._splits = None, [], []
 
     def _drop_scaled_krylov(self) -> None:
         if self._scaled_krylov is not None:
@@ -987,7 +993,8 @@ class Body:
         rtol = self.ksp.getTolerances()[0]
         self._drop_ksp()
         self.sweep = FACTORISED_SWEEP_DOUBLE
-        self.ksp = make_ksp(self._A, self.prefix, self.sweep, splits=self._sweep_splits())
+        self._splits = self._sweep_splits()
+        self.ksp, _ = set_up_relaxed(self._A, self.prefix, self.sweep, splits=self._splits)
         self.set_rtol(rtol)
         self.factorisations += 1
         self.fallbacks += 1

@@ -112,8 +112,8 @@ class System:
             factorised sweep over (T, φ), then u, :data:`~subdomain_contact.body.FACTORISED_SWEEP`)
             or ``"auto"``: for a body meshed in 3D whose largest front exceeds
             ``scene.FRONT_ABOVE`` DOFs (:func:`~subdomain_contact.scene.iterative_by_size`),
-            split where the problem has T or φ and u and the body's own boundary holds
-            every component of u, else iterative; direct otherwise. The
+            split where the problem has T or φ and u, floating or held, else iterative;
+            direct otherwise. The
             option ``-<prefix>body_<name>_solver direct|iterative|split`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.
