@@ -1291,22 +1291,15 @@ class Body:
             return self._gather_kept(y[self.kept_local]), self._gather_kept(Ay[self.kept_local])
         if self.iterative or self.comm.size > 1 or rhs_s.shape[1] == 1:
             return self._solve_each_column(rhs_s)
-        factor = self.ksp.getPC().getFactorMatrix()
         y_s, Ay_s = np.empty_like(rhs_s), np.empty_like(rhs_s)
         width = max(1, COLUMN_BYTES // (8 * self.size))
         for first in range(0, rhs_s.shape[1], width):
             block = slice(first, min(first + width, rhs_s.shape[1]))
-            rhs = np.zeros((self.size, block.stop - block.start), order="F")
+            rhs = np.zeros((self.size, block.stop - block.start))
             rhs[self.kept_local] = rhs_s[:, block]
-            B = PETSc.Mat().createDense(rhs.shape, array=rhs, comm=PETSc.COMM_SELF)
-            X = PETSc.Mat().createDense(rhs.shape, comm=PETSc.COMM_SELF)
-            X.setUp()
-            factor.matSolve(B, X)
-            AX = self.A_bulk.matMult(X)
-            y_s[:, block] = X.getDenseArray(readonly=True)[self.kept_local]
-            Ay_s[:, block] = AX.getDenseArray(readonly=True)[self.kept_local]
-            for mat in (B, X, AX):
-                mat.destroy()
+            y = columns_apply(self.ksp.getPC(), rhs)  # the factorisation's MatMatSolve
+            y_s[:, block] = y[self.kept_local]
+            Ay_s[:, block] = columns_mult(self.A_bulk, y)[self.kept_local]
         return y_s, Ay_s
 
     def _solve_each_column(self, rhs_s: Matrix) -> tuple[Matrix, Matrix]:

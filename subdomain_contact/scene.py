@@ -48,13 +48,28 @@ __all__ = ["Body", "Interface", "Scene", "gather_rows", "load_scene", "match_poi
 #: (the same mesh, 77.7 s against 85.6 s), so factorised bodies alone never spread.
 SPREAD_LOAD = 1.25
 
-#: A body meshed in 3D is solved iteratively by default (``solver="auto"``) where its largest
-#: front (:func:`largest_front`) holds more DOFs than this. A sparse factorisation stores about
-#: front² and works about front³ (nested dissection), so it outgrows a chunky body, not a
-#: slender one: a cube of 100k DOFs of T, φ and u has a front of 7.8k (iterative), the
-#: collector bar slot's bar at 1M DOFs (0.16 × 0.08 m across, 2.2 m long) 1.2k (factorised).
-#: A cube of one field passes it at about 125k DOFs.
+#: A body meshed in 3D whose problem has not both T or φ and u is solved by Krylov + AMG by
+#: default (``solver="auto"``) where its largest front (:func:`largest_front`) holds more
+#: DOFs than this (:data:`SWEEP_FRONT_ABOVE` for one that has). A sparse factorisation
+#: stores about front² and works about front³ (nested dissection), so it outgrows a chunky
+#: body, not a slender one: a cube of 100k DOFs of T, φ and u has a front of 7.8k, the
+#: collector bar slot's bar at 1M DOFs (0.16 × 0.08 m across, 2.2 m long) 1,090. A cube of
+#: one field passes it at about 125k DOFs.
 FRONT_ABOVE = 5_000
+
+#: A 3D body of T or φ and of u is solved by the factorised sweep (FGMRES on one sweep over
+#: its (T, φ) block, then its u block, each factorised in single precision with block
+#: low-rank factors: ``body.FACTORISED_SWEEP``) by default where its largest front holds more
+#: DOFs than this; :data:`FRONT_ABOVE` is for bodies of other fields. Measured (2 ranks, one
+#: run each, the sweep against the whole factorisation with its Schur block, 2026-12-07):
+#: the row of four 3D blocks, fronts 210-220 (5,975 DOFs) 2.5 s against 1.7 s, 320-370
+#: (14,845) 4.2 against 4.1 s, 545-565 (31,420) 8.7 against 10.4 s, about 920 (74,580)
+#: 20.2 against 32.3 s, about 1,975 (218,790) 77.8 against 148.8 s; the collector bar slot at
+#: 174,240 DOFs (its block's front 1,920) 100.6 against 171.2 s on that level. But the slot's
+#: slender bar (front 1,090) and cast iron (600) at 1.07M DOFs by the sweep fell back to MUMPS
+#: (fallbacks 3) and its first two fine Newton steps took 898 s against 668 s: the front
+#: alone does not tell them from the row's chunky blocks, so the rule stays above the bar.
+SWEEP_FRONT_ABOVE = 1_500
 
 
 def largest_front(mesh: dolfinx.mesh.Mesh, per_node: int) -> int:
@@ -78,12 +93,20 @@ def largest_front(mesh: dolfinx.mesh.Mesh, per_node: int) -> int:
     return per_node * comm.allreduce(int(np.count_nonzero(near)))
 
 
-def iterative_by_size(mesh: dolfinx.mesh.Mesh, per_node: int) -> bool:
-    """Whether a body of ``mesh`` is solved by Krylov + AMG by default (its solver "auto").
+def solver_by_size(mesh: dolfinx.mesh.Mesh, per_node: int, sweeps: bool) -> str:
+    """How a body of ``mesh`` is solved by default (its solver "auto"): a ``System`` solver.
 
-    3D, with its largest front (:func:`largest_front`) above :data:`FRONT_ABOVE` DOFs.
+    Meshed in 3D, with its largest front (:func:`largest_front`) above
+    :data:`SWEEP_FRONT_ABOVE` DOFs where its problem ``sweeps`` (has T or φ and u:
+    :func:`~subdomain_contact.solvers.sweepable`): ``"split"``; where it does not, above
+    :data:`FRONT_ABOVE`: ``"iterative"``; else ``"direct"``.
     """
-    return mesh.topology.dim == 3 and largest_front(mesh, per_node) > FRONT_ABOVE
+    if mesh.topology.dim != 3:
+        return "direct"
+    front = largest_front(mesh, per_node)
+    if sweeps:
+        return "split" if front > SWEEP_FRONT_ABOVE else "direct"
+    return "iterative" if front > FRONT_ABOVE else "direct"
 
 
 @dataclass(frozen=True)
@@ -209,7 +232,9 @@ class Scene:
         }
         if solvers is None:  # a body that some problem (T, φ and u: dim + 2 a node) iterates
             most = self.dim + 2
-            iterative = {n for n, b in self.bodies.items() if iterative_by_size(b.mesh, most)}
+            iterative = {
+                n for n, b in self.bodies.items() if solver_by_size(b.mesh, most, True) != "direct"
+            }
         else:
             iterative = {n for n, s in solvers.items() if s != "direct"}
         work = None if iterative else _work(self)  # an iterative body is not condensed
@@ -336,7 +361,7 @@ def load_scene(
             first asked where a body is solved. ``"auto"`` (default): ``"groups"`` with
             several bodies on several ranks, else ``"shared"``; with every body spread over
             all ranks (one group) where a body solved iteratively (or, placed before a
-            ``System``, one that may be: :func:`iterative_by_size` with T, φ and u) would
+            ``System``, one that may be: :func:`solver_by_size` with T, φ and u) would
             leave a rank more than :data:`SPREAD_LOAD` times the mean load. A scene
             of the same bodies (on ``comm``): its rank groups, so that a state interpolates
             between the two (a coarser mesh of a nested iteration, ``System.interpolate``);

@@ -25,7 +25,7 @@ from petsc4py import PETSc
 from subdomain_contact.body import SOLVERS, Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
-from subdomain_contact.scene import iterative_by_size
+from subdomain_contact.scene import solver_by_size
 from subdomain_contact.solvers import sweepable
 
 __all__ = ["LawRangeError", "System"]
@@ -63,11 +63,11 @@ def _assign(body: Body, pairs) -> bool:
 def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
     """How a body is solved (:data:`~subdomain_contact.body.SOLVERS`).
 
-    The option, else ``solver``, else the rule: a large 3D body
-    (:func:`~subdomain_contact.scene.iterative_by_size`) of T or φ and of u by the factorised
-    sweep, floating or held (by FGMRES on weighed rows its single-precision splits reach the
-    tolerance where a floating body's translation nears their reach: docs/iterative_bodies.md),
-    any other large one by AMG, the rest factorised.
+    The option, else ``solver``, else the rule by the body's largest front
+    (:func:`~subdomain_contact.scene.solver_by_size`): a 3D body of T or φ and of u by the
+    factorised sweep, floating or held (by FGMRES on weighed rows its single-precision splits
+    reach the tolerance where a floating body's translation nears their reach:
+    docs/iterative_bodies.md), any other large 3D one by AMG, the rest factorised.
     """
     options = PETSc.Options()
     if options.hasName(prefix + "solver"):
@@ -78,9 +78,7 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
         return solver
     mesh = body.mesh
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    if not iterative_by_size(mesh, per_node):
-        return "direct"
-    return "split" if sweepable(problem.fields) else "iterative"
+    return solver_by_size(mesh, per_node, sweepable(problem.fields))
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
@@ -110,10 +108,10 @@ class System:
         solver: How the bodies are solved: ``"direct"`` (MUMPS), ``"iterative"`` (Krylov +
             AMG, :data:`~subdomain_contact.body.ITERATIVE`), ``"split"`` (GMRES on the
             factorised sweep over (T, φ), then u, :data:`~subdomain_contact.body.FACTORISED_SWEEP`)
-            or ``"auto"``: for a body meshed in 3D whose largest front exceeds
-            ``scene.FRONT_ABOVE`` DOFs (:func:`~subdomain_contact.scene.iterative_by_size`),
-            split where the problem has T or φ and u, floating or held, else iterative;
-            direct otherwise. The
+            or ``"auto"``: for a body meshed in 3D, split where the problem has T or φ and u
+            and the body's largest front exceeds ``scene.SWEEP_FRONT_ABOVE`` DOFs,
+            iterative where it exceeds ``scene.FRONT_ABOVE``, direct otherwise
+            (:func:`~subdomain_contact.scene.solver_by_size`). The
             option ``-<prefix>body_<name>_solver direct|iterative|split`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.

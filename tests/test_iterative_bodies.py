@@ -160,15 +160,21 @@ def test_the_largest_front_is_the_cut_across_the_longest_side(comm):
 
 
 def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
-    """3D with a front above FRONT_ABOVE DOFs → iterative, split where T or φ meets u (held or
-    floating); 2D never; the option wins."""
-    monkeypatch.setattr(scene_module, "FRONT_ABOVE", 50)
+    """3D with a front above SWEEP_FRONT_ABOVE DOFs where T or φ meets u (held or floating) →
+    split, above FRONT_ABOVE where not → iterative, each threshold for its own kind; 2D
+    never; the option wins."""
     blocks = blocks3d_scene(0.025, comm=comm)  # 1.6k DOFs per block, fronts of about 130
-    with sc.System(heated_blocks(blocks)) as system:
-        assert all(body.iterative and not body.split for body in system.bodies.values())
     row = blocks_row_scene(4, 0.05, comm=comm)  # T, φ, u: fronts of about 5 · 40
-    with sc.System(squeezed_row(row)) as system:  # the inner blocks held along x by contacts
-        assert all(body.iterative and body.split for body in system.bodies.values())
+    for sweep, other in ((1000, 50), (50, 1000)):
+        monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", sweep)
+        monkeypatch.setattr(scene_module, "FRONT_ABOVE", other)
+        with sc.System(heated_blocks(blocks)) as system:  # T alone
+            assert all(body.iterative == (other < 130) for body in system.bodies.values())
+            assert not any(body.split for body in system.bodies.values())
+        with sc.System(squeezed_row(row)) as system:  # the inner blocks held along x by contacts
+            assert all(body.split == (sweep < 200) for body in system.bodies.values())
+            assert all(body.iterative == body.split for body in system.bodies.values())
+    monkeypatch.setattr(scene_module, "FRONT_ABOVE", 50)
     with pytest.raises(ValueError, match=r"body 'block_[AB]'.* needs T or φ, and u"):
         sc.System(heated_blocks(blocks), solver="split")
     plates = two_plates_scene(64, 64, comm=comm)  # 2D, 4.2k DOFs per plate
@@ -194,14 +200,14 @@ def test_bodies_are_placed_by_their_solvers_those_of_a_nesting_by_the_finer_mesh
     coarser scene loaded like it, placed first, takes the finer scene's groups placed so.
 
     The row of four 3D blocks at 0.06 m (704, 708, 694, 700 cells measured; fronts 140-145
-    with T, φ, u) and at 0.1 m (fronts 60), FRONT_ABOVE 100, the inner two given AMG by their
+    with T, φ, u) and at 0.1 m (fronts 60), SWEEP_FRONT_ABOVE 100, the inner two given AMG by their
     option (``-sc_body_block_1_solver iterative``; the rule gives every block the sweep): on
     the fine mesh the ends by the sweep and the inner two by AMG, on the coarse the ends
     factorised. By cells alone (largest first onto the lightest rank) the fine mesh's ends
     share one of 2 ranks and the inner two the other; by solvers each rank holds one of
     each kind.
     """
-    monkeypatch.setattr(scene_module, "FRONT_ABOVE", 100)
+    monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", 100)
     options = PETSc.Options()
     for name in ("block_1", "block_2"):
         options[f"sc_body_{name}_solver"] = "iterative"
