@@ -78,7 +78,8 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
         return solver
     mesh = body.mesh
     per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    return solver_by_size(mesh, per_node, sweepable(problem.fields))
+    share = problem.scene.contact_share(body.name)
+    return solver_by_size(mesh, per_node, sweepable(problem.fields), share)
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:

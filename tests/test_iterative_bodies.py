@@ -159,21 +159,43 @@ def test_the_largest_front_is_the_cut_across_the_longest_side(comm):
     assert scene_module.largest_front(bar, 1) == 17**2
 
 
+def test_the_contact_share_counts_the_vertices_on_the_contact_facets(comm):
+    """A box of 8 × 6 × 4 cubes, its faces x = 0 (7 · 5 of its 9 · 7 · 5 vertices) and
+    x = 0 with y = 0 (7 · 5 + 9 · 5 − 5, the edge counted once) tagged as contacts."""
+    box = dolfinx.mesh.create_box(comm, [[0, 0, 0], [2, 1.5, 1]], [8, 6, 4])
+    fdim = box.topology.dim - 1
+    marks = []
+    for tag, where in ((1, lambda x: np.isclose(x[0], 0)), (2, lambda x: np.isclose(x[1], 0))):
+        facets = dolfinx.mesh.locate_entities_boundary(box, fdim, where)
+        marks.append((facets, np.full(facets.size, tag, dtype=np.int32)))
+    facets = np.concatenate([f for f, _ in marks])
+    order = np.argsort(facets)
+    tags = dolfinx.mesh.meshtags(
+        box, fdim, facets[order], np.concatenate([t for _, t in marks])[order]
+    )
+    assert scene_module.contact_share(box, tags, [1]) == pytest.approx(35 / 315, rel=1e-15)
+    assert scene_module.contact_share(box, tags, [1, 2]) == pytest.approx(75 / 315, rel=1e-15)
+
+
 def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
-    """3D with a front above SWEEP_FRONT_ABOVE DOFs where T or φ meets u (held or floating) →
-    split, above FRONT_ABOVE where not → iterative, each threshold for its own kind; 2D
-    never; the option wins."""
+    """3D with a front above SWEEP_FRONT_ABOVE DOFs where T or φ meets u (held or floating)
+    and at most SWEEP_CONTACT_SHARE of the vertices are on contacts → split, any other
+    above FRONT_ABOVE → iterative; 2D never; the option wins."""
     blocks = blocks3d_scene(0.025, comm=comm)  # 1.6k DOFs per block, fronts of about 130
     row = blocks_row_scene(4, 0.05, comm=comm)  # T, φ, u: fronts of about 5 · 40
-    for sweep, other in ((1000, 50), (50, 1000)):
+    shares = [row.contact_share(name) for name in row.bodies]
+    assert max(shares) < 0.5  # one or two faces of six
+    for sweep, other, share in ((1000, 50, 0.5), (50, 1000, 0.5), (50, 50, 0.0)):
         monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", sweep)
         monkeypatch.setattr(scene_module, "FRONT_ABOVE", other)
+        monkeypatch.setattr(scene_module, "SWEEP_CONTACT_SHARE", share)
         with sc.System(heated_blocks(blocks)) as system:  # T alone
             assert all(body.iterative == (other < 130) for body in system.bodies.values())
             assert not any(body.split for body in system.bodies.values())
+        swept = sweep < 200 and share > 0.0
         with sc.System(squeezed_row(row)) as system:  # the inner blocks held along x by contacts
-            assert all(body.split == (sweep < 200) for body in system.bodies.values())
-            assert all(body.iterative == body.split for body in system.bodies.values())
+            assert all(body.split == swept for body in system.bodies.values())
+            assert all(body.iterative == (swept or other < 200) for body in system.bodies.values())
     monkeypatch.setattr(scene_module, "FRONT_ABOVE", 50)
     with pytest.raises(ValueError, match=r"body 'block_[AB]'.* needs T or φ, and u"):
         sc.System(heated_blocks(blocks), solver="split")
