@@ -117,23 +117,6 @@ def contact_share(
     return mesh.comm.allreduce(on) / max(mesh.comm.allreduce(owned), 1)
 
 
-def solver_by_size(mesh: dolfinx.mesh.Mesh, per_node: int, sweeps: bool, share: float) -> str:
-    """How a body of ``mesh`` is solved by default (its solver "auto"): a ``System`` solver.
-
-    Meshed in 3D, with its largest front (:func:`largest_front`) above
-    :data:`SWEEP_FRONT_ABOVE` DOFs, where its problem ``sweeps`` (has T or φ and u:
-    :func:`~subdomain_contact.solvers.sweepable`) and at most :data:`SWEEP_CONTACT_SHARE`
-    of its vertices are on contacts (``share``, :func:`contact_share`): ``"split"``; any
-    other above :data:`FRONT_ABOVE`: ``"iterative"``; else ``"direct"``.
-    """
-    if mesh.topology.dim != 3:
-        return "direct"
-    front = largest_front(mesh, per_node)
-    if sweeps and share <= SWEEP_CONTACT_SHARE and front > SWEEP_FRONT_ABOVE:
-        return "split"
-    return "iterative" if front > FRONT_ABOVE else "direct"
-
-
 @dataclass(frozen=True)
 class Body:
     """One body (natural subdomain) with its own mesh.
@@ -258,9 +241,7 @@ class Scene:
         if solvers is None:  # a body that some problem (T, φ and u: dim + 2 a node) iterates
             most = self.dim + 2
             iterative = {
-                n
-                for n, b in self.bodies.items()
-                if solver_by_size(b.mesh, most, True, self.contact_share(n)) != "direct"
+                n for n, b in self.bodies.items() if self.solver_by_size(b, most, True) != "direct"
             }
         else:
             iterative = {n for n, s in solvers.items() if s != "direct"}
@@ -310,10 +291,28 @@ class Scene:
         """Topological dimension of the bodies' meshes (2 or 3)."""
         return next(iter(self.bodies.values())).mesh.topology.dim
 
-    def contact_share(self, body: str) -> float:
+    def contact_share(self, body: Body) -> float:
         """The share of ``body``'s mesh vertices on its contact interfaces (collective)."""
-        b = self.bodies[body]
-        return contact_share(b.mesh, b.facet_tags, [i.tag for i in self.interfaces_of(body)])
+        tags = [i.tag for i in self.interfaces_of(body.name)]
+        return contact_share(body.mesh, body.facet_tags, tags)
+
+    def solver_by_size(self, body: Body, per_node: int, sweeps: bool) -> str:
+        """How ``body`` is solved by default (its solver "auto"): a ``System`` solver.
+
+        Meshed in 3D, with its largest front (:func:`largest_front`, ``per_node`` DOFs a
+        node) above :data:`SWEEP_FRONT_ABOVE` DOFs, where its problem ``sweeps`` (has T or
+        φ and u: :func:`~subdomain_contact.solvers.sweepable`) and at most
+        :data:`SWEEP_CONTACT_SHARE` of its vertices are on contacts (:meth:`contact_share`,
+        counted only then): ``"split"``; any other above :data:`FRONT_ABOVE`:
+        ``"iterative"``; else ``"direct"``. Collective.
+        """
+        mesh = body.mesh
+        if mesh.topology.dim != 3:
+            return "direct"
+        front = largest_front(mesh, per_node)
+        if sweeps and front > SWEEP_FRONT_ABOVE and self.contact_share(body) <= SWEEP_CONTACT_SHARE:
+            return "split"
+        return "iterative" if front > FRONT_ABOVE else "direct"
 
     def interfaces_of(self, body: str) -> list[Interface]:
         """Interfaces that ``body`` touches, in scene order."""
@@ -393,7 +392,7 @@ def load_scene(
             first asked where a body is solved. ``"auto"`` (default): ``"groups"`` with
             several bodies on several ranks, else ``"shared"``; with every body spread over
             all ranks (one group) where a body solved iteratively (or, placed before a
-            ``System``, one that may be: :func:`solver_by_size` with T, φ and u) would
+            ``System``, one that may be: :meth:`solver_by_size` with T, φ and u) would
             leave a rank more than :data:`SPREAD_LOAD` times the mean load. A scene
             of the same bodies (on ``comm``): its rank groups, so that a state interpolates
             between the two (a coarser mesh of a nested iteration, ``System.interpolate``);

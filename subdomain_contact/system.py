@@ -25,7 +25,6 @@ from petsc4py import PETSc
 from subdomain_contact.body import SOLVERS, Body
 from subdomain_contact.masters import MasterLayer, master_layer
 from subdomain_contact.physics import FIELDS, Displacement, Problem
-from subdomain_contact.scene import solver_by_size
 from subdomain_contact.solvers import sweepable
 
 __all__ = ["LawRangeError", "System"]
@@ -64,8 +63,8 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
     """How a body is solved (:data:`~subdomain_contact.body.SOLVERS`).
 
     The option, else ``solver``, else the rule by the body's largest front
-    (:func:`~subdomain_contact.scene.solver_by_size`): a 3D body of T or φ and of u by the
-    factorised sweep, floating or held (by FGMRES on weighed rows its single-precision splits
+    (:meth:`~subdomain_contact.scene.Scene.solver_by_size`): a 3D body of T or φ and of u by
+    the factorised sweep, floating or held (by FGMRES on weighed rows its single-precision splits
     reach the tolerance where a floating body's translation nears their reach:
     docs/iterative_bodies.md), any other large 3D one by AMG, the rest factorised.
     """
@@ -76,10 +75,9 @@ def _solver(problem: Problem, body, solver: str, prefix: str) -> str:
             raise ValueError(f"-{prefix}solver {solver}: give one of {', '.join(SOLVERS)}")
     if solver != "auto":
         return solver
-    mesh = body.mesh
-    per_node = sum(mesh.geometry.dim if f == "displacement" else 1 for f in problem.fields)
-    share = problem.scene.contact_share(body.name)
-    return solver_by_size(mesh, per_node, sweepable(problem.fields), share)
+    dim = body.mesh.geometry.dim
+    per_node = sum(dim if f == "displacement" else 1 for f in problem.fields)
+    return problem.scene.solver_by_size(body, per_node, sweepable(problem.fields))
 
 
 def _covering_cells(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
@@ -112,7 +110,7 @@ class System:
             or ``"auto"``: for a body meshed in 3D, split where the problem has T or φ and u
             and the body's largest front exceeds ``scene.SWEEP_FRONT_ABOVE`` DOFs,
             iterative where it exceeds ``scene.FRONT_ABOVE``, direct otherwise
-            (:func:`~subdomain_contact.scene.solver_by_size`). The
+            (:meth:`~subdomain_contact.scene.Scene.solver_by_size`). The
             option ``-<prefix>body_<name>_solver direct|iterative|split`` wins for that body.
 
     Call :meth:`destroy` (collectively) when done, or use the system as a context manager.

@@ -183,7 +183,7 @@ def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
     above FRONT_ABOVE → iterative; 2D never; the option wins."""
     blocks = blocks3d_scene(0.025, comm=comm)  # 1.6k DOFs per block, fronts of about 130
     row = blocks_row_scene(4, 0.05, comm=comm)  # T, φ, u: fronts of about 5 · 40
-    shares = [row.contact_share(name) for name in row.bodies]
+    shares = [row.contact_share(body) for body in row.bodies.values()]
     assert max(shares) < 0.5  # one or two faces of six
     for sweep, other, share in ((1000, 50, 0.5), (50, 1000, 0.5), (50, 50, 0.0)):
         monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", sweep)
