@@ -212,6 +212,29 @@ def test_a_full_step_that_runs_away_is_halved_and_newton_converges(comm, monkeyp
         sc.solve(system, line_search="basic")
 
 
+def test_each_line_search_that_fails_says_why_before_the_next_begins(comm, capsys):
+    """``progress``: under ``"auto"`` each failed attempt prints its error's first line before
+    the next line search's first iterate, and the error names every attempt. The squeezed
+    Joule bars take 9 full steps (measured): allowed one, each line search fails."""
+    system = make_system(squeezed_joule_bars(bars_scene(8, 2, comm=comm)))
+    system.reset({"temperature": 300.0})
+    with pytest.raises(sc.NewtonConvergenceError) as failure:
+        sc.solve(system, max_it=1, progress=True)
+    for attempt in newton.AUTO:
+        assert f"line search {attempt}: Newton failed after 1 iterations" in str(failure.value)
+    lines = capsys.readouterr().out.splitlines()
+    if comm.rank == 0:  # the progress lines are rank 0's
+        said = [i for i, line in enumerate(lines) if line.startswith("Newton (")]
+        lines = [lines[i] for i in said]
+        expected = []
+        for attempt in newton.AUTO:  # iterates 0 and 1, then why it stopped
+            expected += [f"Newton ({attempt})   0:", f"Newton ({attempt})   1:"]
+            expected += [f"Newton ({attempt}): Newton failed after 1 iterations: DIVERGED_MAX_IT"]
+        assert len(lines) == len(expected), lines
+        for line, start in zip(lines, expected, strict=True):
+            assert line.startswith(start), (line, start)
+
+
 class _Landing:
     """A one-unknown system whose residual, relative to its scale, is ``law(x)``."""
 
