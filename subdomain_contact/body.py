@@ -170,6 +170,16 @@ FACTORISED_SWEEP_DOUBLE: Mapping[str, str] = MappingProxyType(
 #: by FGMRES on the factorised sweep over its fields (``split``, :data:`FACTORISED_SWEEP`).
 SOLVERS = ("direct", "iterative", "split")
 
+#: A body whose Krylov solve failed on this many matrices in a row (a solve of each, the
+#: others on it may have converged) is factorised by MUMPS for the next ``2^(n-1)``
+#: matrices after its n-th such matrix before it tries again (a back-off:
+#: :meth:`Body._krylov`). One failure is a wild iterate (the row of four 3D blocks at 1.01M
+#: DOFs: a step that moved a field by 22 times its largest value broke GAMG down once); two
+#: in a row a solver that does not suit the body (the collector bar slot's cast iron, swept
+#: by option: its first solves on each Jacobian took 8-9 FGMRES iterations, a later one
+#: stopped at 1,000, and MUMPS solved the rest, at every Jacobian).
+FAILURES_IN_A_ROW = 2
+
 #: Refinements of an iterative solve of a body of several fields, at most, while one
 #: field's residual is above the tolerance relative to its own scale.
 FIELD_REFINEMENTS = 3
@@ -285,9 +295,13 @@ class Body:
         self._solved_scales = np.zeros(0)
         #: MUMPS on the body's matrix where its Krylov solve failed, until the matrix changes.
         self._direct: PETSc.KSP | None = None
-        #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`), and
+        #: Matrices on which the Krylov solve failed and MUMPS took over (:meth:`_krylov`) or
+        #: that MUMPS took at once after failures in a row (:data:`FAILURES_IN_A_ROW`), and
         #: sweeps factorised again in double precision (:meth:`_sweep_in_double`).
         self.fallbacks = 0
+        #: Matrices in a row on which a Krylov solve failed (those MUMPS took at once between
+        #: them not counted), and the matrices MUMPS takes next at once.
+        self.failures_in_a_row, self._skip = 0, 0
         self._near_null: list[PETSc.Object] = []
         #: A split body's (T, φ) and u index sets, among ``_near_null`` (:meth:`_sweep_splits`).
         self._splits: list[tuple[str, PETSc.IS]] = []
@@ -649,9 +663,19 @@ class Body:
                 old ones). A split body makes room instead (:meth:`_room_for_sweep`).
         """
         rtol = None if self.ksp is None else self.ksp.getTolerances()[0]  # an iterative one's
+        if self._direct is None:  # the last matrix solved by its Krylov solve throughout
+            self.failures_in_a_row = 0
         destroy(self._direct)  # a matrix of other values: the Krylov solve is tried again
         self._direct = None
         self._drop_scaled_krylov()  # made again on the new matrix at the next solve
+        if self._skip:  # after failures in a row: MUMPS at once, the Krylov's set-up left
+            self._skip -= 1
+            self.whole_matrix()
+            self._fall_back(
+                f"its Krylov solve failed at {self.failures_in_a_row} matrices in a row; "
+                f"MUMPS for {self._skip + 1} more before it tries again"
+            )
+            return
         if self.ksp is not None and self.split:
             self._room_for_sweep()
         elif self.ksp is not None and not self.iterative:
@@ -1009,7 +1033,9 @@ class Body:
         -5, at a state far from the solution: the row of four 3D blocks at 1.01M DOFs, a
         step that moved a field by 22 times its largest value), the body's matrix is
         factorised by MUMPS (options under ``-<prefix>direct_``) and solves by it until the
-        matrix changes; the next matrix tries the Krylov solve again. A sweep still in single
+        matrix changes; the next matrix tries the Krylov solve again, but after the n-th
+        failure in a row (n ≥ :data:`FAILURES_IN_A_ROW`) MUMPS takes the next ``2^(n-1)``
+        matrices first, without the Krylov's set-up. A sweep still in single
         precision is first factorised again in double (:meth:`_sweep_in_double`), as a short
         one is, and solves again. Where MUMPS's analysis
         says those factors would not fit in the node's memory left, a ``MemoryError`` says so
@@ -1051,22 +1077,36 @@ class Body:
             return self._krylov(rhs, rtol, scales)
         if reason < 0 and self.iterative:
             kind = f"{ksp.getType().upper()} + {self.ksp.getPC().getType().upper()}"
-            what = (
-                f"body '{self.name}' ({kind} stopped with PETSc reason {reason} after "
-                f"{iterations} iterations; MUMPS instead)"
+            self.failures_in_a_row += 1
+            if self.failures_in_a_row >= FAILURES_IN_A_ROW:
+                self._skip = 2 ** (self.failures_in_a_row - 1)
+            self._fall_back(
+                f"{kind} stopped with PETSc reason {reason} after {iterations} iterations; "
+                "MUMPS instead"
             )
-            advice = (
-                f"a larger Krylov budget (-{self.prefix}ksp_max_it, "
-                f"-{self.prefix}ksp_gmres_restart), shorter Newton steps (a smaller "
-                "max_temperature_step of sc.solve), or fewer ranks per node"
-            )
-            self._direct = factorise(
-                self._A, self.prefix + "direct_", what, dim=self.dim, again=False, advice=advice
-            )
-            self.factorisations += 1
-            self.fallbacks += 1
             return self._krylov(rhs)
         return self._checked(ksp, x)
+
+    def _fall_back(self, why: str) -> None:
+        """MUMPS on the body's matrix (options under ``-<prefix>direct_``) until it changes.
+
+        ``why`` names the cause in the error raised where the factors would not fit.
+        """
+        advice = (
+            f"a larger Krylov budget (-{self.prefix}ksp_max_it, "
+            f"-{self.prefix}ksp_gmres_restart), shorter Newton steps (a smaller "
+            "max_temperature_step of sc.solve), or fewer ranks per node"
+        )
+        self._direct = factorise(
+            self._A,
+            self.prefix + "direct_",
+            f"body '{self.name}' ({why})",
+            dim=self.dim,
+            again=False,
+            advice=advice,
+        )
+        self.factorisations += 1
+        self.fallbacks += 1
 
     def _field_scales(self, rhs: Matrix, y: Matrix) -> Matrix:
         """Each field's scale ``‖b_f‖∞ + ‖A_f‖∞ ‖y_f‖∞`` (:meth:`_field_residual`), all ranks.

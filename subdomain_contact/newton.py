@@ -107,7 +107,8 @@ class Result:
         line_search: The line search that converged.
         shortened: Newton steps that the ``"limited"`` line search shortened.
         fallbacks: Bodies' matrices whose Krylov solve failed and that MUMPS factorised
-            instead, whose single-precision sweep fell short and was factorised again in
+            instead, or took at once after such failures in a row (``body.FAILURES_IN_A_ROW``),
+            whose single-precision sweep fell short and was factorised again in
             double (these among the factorisations), or whose sweep had no room to be
             factorised again and that AMG solves since.
     """
