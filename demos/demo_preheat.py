@@ -60,6 +60,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import subdomain_contact as sc
+from subdomain_contact.newton import FORCING, STEP_RTOL
 from subdomain_contact.physics import (
     Convection,
     CurrentDensity,
@@ -558,8 +559,50 @@ def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False
 
 
 # ## Subdomain and monolithic Newton, step by step (the first steps, fixed length)
+#
+# Newton stops where each field's residual is below 1e-10 of its scale, which bounds a
+# state's error by the residual over the stiffness that holds it. With the mechanics, the
+# bar, its cast iron and the paste are held along the slot by the slip spring and the open
+# contacts' ties alone, about 1e-6 of the scale's stiffness (inferred from the run below: a
+# residual of 2.4e-12 left them 1.5e-6 off), so a route's state may be up to 1e-4 off there
+# by that test. Measured (2 ranks, 2026-12-08, a machine with AVX-512 kernels): the first
+# step's subdomain Newton stopped at a residual of 2.4e-12 of the scale after a step of
+# 9.2e-4, 1.5e-6 of the largest displacement away from the monolithic one's, which took a
+# step more (9.3e-11 apart elsewhere, where the paths end alike). So each route's state is
+# compared after more Newton steps, applied, until one moves every field by at most
+# `STEP_RTOL` (1e-9) of its largest value, Newton's own step test: the first correction is
+# that route's error estimate (reported). There the corrections fell by a factor of about
+# 1.6e-3 a step on both routes (1.5e-6, 2.4e-9, 3.9e-12 on the subdomain route's first
+# step; 2.2e-9, 3.5e-12 on the monolithic one's): linear convergence, the Jacobian inexact
+# in that mode by about that much, so a last correction c leaves about 1.6e-3 c, 2e-12 at
+# most. The routes then agree to 8e-16.
+POLISH_STEPS = 3  # at most: 1.5e-6, 2.4e-9, then below STEP_RTOL
+
+
+def polish(system: sc.System, linear) -> dict[str, float]:
+    """One more Newton step from the system's state, applied (collective).
+
+    Returns: Each field's correction, relative to the field's largest value: Newton's
+    estimate of the error of the state before it.
+    """
+    x, f = system.state(), system.create_vector()
+    system.residual(f)
+    system.assemble_jacobian()
+    linear.setup(system)
+    # to Newton's own forcing term: the correction to 1e-8 of itself
+    f.array[:] = linear.solve(f.array_r.copy(), sc.Tolerance(rtol=FORCING))[0]
+    sizes, step = system.field_max_norms(x), system.field_max_norms(f)
+    x.axpy(-1.0, f)
+    system.set_state(x)
+    x.destroy()
+    f.destroy()
+    return {n: step[n] / sizes[n] if sizes[n] > 0 else step[n] for n in step}
+
+
 def routes(coke: float, steps: int, length: float) -> dict:
-    """The largest per-field difference between the two routes at each of ``steps`` steps."""
+    """Each route's error estimate, and the largest per-field difference between the two
+    routes, each polished by one more Newton step (:func:`polish`), at each of ``steps``
+    steps."""
     current = schedule(args.schedule)
     scene = load(coke)
     systems = {name: sc.System(problem(scene, current)) for name in ("subdomain", "monolithic")}
@@ -568,11 +611,20 @@ def routes(coke: float, steps: int, length: float) -> dict:
         system.reset({"temperature": START})
         steppers[name] = sc.Stepper(system, "bdf2")
     differences, seconds = [], dict.fromkeys(systems, 0.0)
+    estimates: dict[str, list] = {name: [] for name in systems}
+    polished: dict[str, list] = {name: [] for name in systems}  # the last corrections
     for _ in range(steps):
         for name, stepper in steppers.items():
             tic = time.perf_counter()
             stepper.advance(length, solvers[name], rtol=1e-10)
             seconds[name] += time.perf_counter() - tic
+            correction = polish(systems[name], solvers[name])
+            estimates[name].append(correction)
+            for _ in range(POLISH_STEPS - 1):
+                if max(correction.values()) <= STEP_RTOL:
+                    break
+                correction = polish(systems[name], solvers[name])
+            polished[name].append(correction)
         a, b = (s.state() for s in systems.values())
         differences.append(systems["subdomain"].difference(a, b))
         a.destroy()
@@ -581,7 +633,13 @@ def routes(coke: float, steps: int, length: float) -> dict:
         solver.destroy()
     for system in systems.values():
         system.destroy()
-    return {"step [s]": length, "differences": differences, "seconds": seconds}
+    return {
+        "step [s]": length,
+        "differences": differences,
+        "newton error estimates": estimates,
+        "last corrections": polished,
+        "seconds": seconds,
+    }
 
 
 args.out.mkdir(parents=True, exist_ok=True)
@@ -607,7 +665,8 @@ report: dict = {
     "ranks": comm.size,
 }
 report["routes"] = routes(args.coke, 3, 600.0)
-say(f"routes: largest differences per step {report['routes']['differences']}")
+say(f"routes: largest differences per step {report['routes']['differences']}, Newton's "
+    f"error estimates {report['routes']['newton error estimates']}")  # fmt: skip
 # The base bed by both routes (--small: the subdomain route; the routes are compared above),
 # then the 30 mm bed by the subdomain route.
 cases = [(args.coke, "subdomain")]
