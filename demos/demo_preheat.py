@@ -573,9 +573,11 @@ def run(coke: float, out: Path, linear: str = "subdomain", restart: bool = False
 # `STEP_RTOL` (1e-9) of its largest value, Newton's own step test: the first correction is
 # that route's error estimate (reported). There the corrections fell by a factor of about
 # 1.6e-3 a step on both routes (1.5e-6, 2.4e-9, 3.9e-12 on the subdomain route's first
-# step; 2.2e-9, 3.5e-12 on the monolithic one's): linear convergence, the Jacobian inexact
-# in that mode by about that much, so a last correction c leaves about 1.6e-3 c, 2e-12 at
-# most. The routes then agree to 8e-16.
+# step; 2.2e-9, 3.5e-12 on the monolithic one's): linear convergence, as the Newton matrix
+# holds open contacts by a tie that the residual has not (physics._half_link: "exact to
+# 1e-3 on open nodes"; a finite difference along the correction matched the matrix's
+# product to 1.59e-3 at two amplitudes 10 apart), so a last correction c leaves about
+# 1.6e-3 c, 2e-12 at most. The routes then agree to 8e-16.
 POLISH_STEPS = 3  # at most: 1.5e-6, 2.4e-9, then below STEP_RTOL
 
 
