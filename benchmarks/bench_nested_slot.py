@@ -5,7 +5,8 @@ Runs ``demos/demo_collector_bar_slot.py`` twice in this process, base case only
 on the run's mesh) and once with ``--levels N`` (from 300 K on a mesh 2^(N-1) times coarser,
 then on each finer mesh from the solution before it). Printed per setup and route: Newton
 steps on the run's mesh, the whole solve's wall time (coarser levels included) and the
-ratio nested / cold measured in the same run, and the two voltage drops.
+ratio nested / cold measured in the same run, and the two voltage drops. Each setup in a run
+of its own: a run of both starts the second from the first one's solution.
 
 Run: ``./dev python benchmarks/bench_nested_slot.py [--size 0.06 --fine 0.02] [--levels 3]``
 (serial) or under ``OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2``. Not a test: timings on a
@@ -35,13 +36,16 @@ folder = Path(comm.bcast(tempfile.mkdtemp(prefix="bench_nested_") if comm.rank =
 
 
 def run(levels: int) -> dict:
-    """The demo's report with ``levels`` meshes."""
-    out = folder / f"levels_{levels}"
-    sys.argv = [str(DEMO), "--no-study", "--size", str(args.size), "--fine", str(args.fine),
-                "--levels", str(levels), "--out", str(out), "--setups", *args.setups]  # fmt: skip
-    runpy.run_path(str(DEMO), run_name="__main__")
-    comm.barrier()
-    return json.loads((out / "report.json").read_text())["runs"]
+    """The demo's runs with ``levels`` meshes, each setup from the cold state."""
+    runs = {}
+    for setup in args.setups:
+        out = folder / f"levels_{levels}_{setup}"
+        sys.argv = [str(DEMO), "--no-study", "--size", str(args.size), "--fine", str(args.fine),
+                    "--levels", str(levels), "--out", str(out), "--setups", setup]  # fmt: skip
+        runpy.run_path(str(DEMO), run_name="__main__")
+        comm.barrier()
+        runs |= json.loads((out / "report.json").read_text())["runs"]
+    return runs
 
 
 cold, nested = run(1), run(args.levels)

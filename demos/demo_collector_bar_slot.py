@@ -362,7 +362,9 @@ def solve_level(
     return level, result, entry
 
 
-def nested(system: sc.System, setup: str, bar_height: float, linear: str, start: PETSc.Vec | None):
+def nested(
+    system: sc.System, setup: str, bar_height: float, linear: str, start: PETSc.Vec | None = None
+):
     """Newton by ``linear`` on the coarser meshes, then on ``system``: (result, levels).
     From ``start`` (another setup's solution on ``system``'s scene), on ``system`` alone.
 
