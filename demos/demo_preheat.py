@@ -602,9 +602,9 @@ def polish(system: sc.System, linear) -> dict[str, float]:
 
 
 def routes(coke: float, steps: int, length: float) -> dict:
-    """Each route's error estimate, and the largest per-field difference between the two
-    routes, each polished by one more Newton step (:func:`polish`), at each of ``steps``
-    steps."""
+    """At each of ``steps`` steps: each route's error estimate (its first :func:`polish`),
+    and the largest per-field difference between the two routes, each polished until a
+    correction is at most ``STEP_RTOL`` (at most :data:`POLISH_STEPS`)."""
     current = schedule(args.schedule)
     scene = load(coke)
     systems = {name: sc.System(problem(scene, current)) for name in ("subdomain", "monolithic")}
