@@ -50,7 +50,7 @@ SPREAD_LOAD = 1.25
 
 #: A body meshed in 3D whose problem has not both T or φ and u is solved by Krylov + AMG by
 #: default (``solver="auto"``) where its largest front (:func:`largest_front`) holds more
-#: DOFs than this (:data:`SWEEP_FRONT_ABOVE` for one that has). A sparse factorisation
+#: DOFs than this (:data:`SWEEP_ABOVE` for one that has). A sparse factorisation
 #: stores about front² and works about front³ (nested dissection), so it outgrows a chunky
 #: body, not a slender one: a cube of 100k DOFs of T, φ and u has a front of 7.8k, the
 #: collector bar slot's bar at 1M DOFs (0.16 × 0.08 m across, 2.2 m long) 1,090. A cube of
@@ -59,18 +59,18 @@ FRONT_ABOVE = 5_000
 
 #: A 3D body of T or φ and of u is solved by the factorised sweep (FGMRES on one sweep over
 #: its (T, φ) block, then its u block, each factorised in single precision with block
-#: low-rank factors: ``body.FACTORISED_SWEEP``) by default where its largest front holds more
-#: DOFs than this; :data:`FRONT_ABOVE` is for bodies of other fields. Measured (2 ranks, one
-#: run each, the sweep against the whole factorisation with its Schur block, 2026-12-07):
-#: the row of four 3D blocks, fronts 210-220 (5,975 DOFs) 2.5 s against 1.7 s, 320-370
-#: (14,845) 4.2 against 4.1 s, 545-565 (31,420) 8.7 against 10.4 s, about 920 (74,580)
-#: 20.2 against 32.3 s, about 1,975 (218,790) 77.8 against 148.8 s; the collector bar slot at
-#: 174,240 DOFs (its block's front 1,920) 100.6 against 171.2 s on that level. But at 1.07M
-#: DOFs the slot's slender bar (front 1,090) by the sweep made its first two fine Newton
-#: steps take 838 s against 668 s (no fallback; its cast iron, 600, is kept factorised by
-#: :data:`SWEEP_CONTACT_SHARE`): the front alone does not tell it from the row's chunky
-#: blocks, so the rule stays above the bar.
-SWEEP_FRONT_ABOVE = 1_500
+#: low-rank factors: ``body.FACTORISED_SWEEP``) by default where its largest front F cubed
+#: over its DOFs n passes this (:func:`sweep_weight`): the whole factorisation works about
+#: F³ (its top separator's dense front), the sweep saves most of it (its splits' fronts are
+#: 2/5 and 3/5 of F, factorised in single precision) and pays FGMRES iterations of about n
+#: each. Measured (2 ranks, one run each, the sweep against the whole factorisation with its
+#: Schur block; F³/n, factorised time over swept time), the row of four 3D blocks: 6,660
+#: (5,975 DOFs) 0.68, 11,070 (14,845) 0.98, 21,800 (31,420) 1.20, 41,900 (74,580) 1.60,
+#: 140,800 (218,790) 1.91; the collector bar slot's block at 34,510 DOFs, 11,000: 1.41 (on
+#: the level), at 174,240, 61,600: 1.70; its slender bar at 1.07M DOFs, 8,640: 0.80 (two
+#: Newton steps, 668 s against 838 s), on the row's curve where its front alone (1,090, the
+#: row's 920 won 1.6 times) was not. The row's crossover is about 11,500 (2026-12-07/08).
+SWEEP_ABOVE = 12_000
 
 #: The share of a body's vertices on its contacts above which it is not swept by default.
 #: The sweep leaves out only the contacts' dependence on u; where nearly every node is on a
@@ -102,6 +102,14 @@ def largest_front(mesh: dolfinx.mesh.Mesh, per_node: int) -> int:
     h = diameters / comm.allreduce(cells)
     near = np.abs(x[:, side] - 0.5 * (lo[side] + hi[side])) < 0.5 * h
     return per_node * comm.allreduce(int(np.count_nonzero(near)))
+
+
+def sweep_weight(front: int, dofs: int) -> float:
+    """``front³ / dofs``: a whole factorisation's work over one Krylov iteration's.
+
+    Of a body's largest front and its DOFs (:data:`SWEEP_ABOVE`).
+    """
+    return front**3 / max(dofs, 1)
 
 
 def contact_share(
@@ -300,17 +308,19 @@ class Scene:
         """How ``body`` is solved by default (its solver "auto"): a ``System`` solver.
 
         Meshed in 3D, with its largest front (:func:`largest_front`, ``per_node`` DOFs a
-        node) above :data:`SWEEP_FRONT_ABOVE` DOFs, where its problem ``sweeps`` (has T or
-        φ and u: :func:`~subdomain_contact.solvers.sweepable`) and at most
-        :data:`SWEEP_CONTACT_SHARE` of its vertices are on contacts (:meth:`contact_share`,
-        counted only then): ``"split"``; any other above :data:`FRONT_ABOVE`:
-        ``"iterative"``; else ``"direct"``. Collective.
+        node) cubed over its DOFs above :data:`SWEEP_ABOVE` (:func:`sweep_weight`), where its
+        problem ``sweeps`` (has T or φ and u: :func:`~subdomain_contact.solvers.sweepable`)
+        and at most :data:`SWEEP_CONTACT_SHARE` of its vertices are on contacts
+        (:meth:`contact_share`, counted only then): ``"split"``; any other whose front is
+        above :data:`FRONT_ABOVE`: ``"iterative"``; else ``"direct"``. Collective.
         """
         mesh = body.mesh
         if mesh.topology.dim != 3:
             return "direct"
         front = largest_front(mesh, per_node)
-        if sweeps and front > SWEEP_FRONT_ABOVE and self.contact_share(body) <= SWEEP_CONTACT_SHARE:
+        dofs = mesh.topology.index_map(0).size_global * per_node
+        heavy = sweep_weight(front, dofs) > SWEEP_ABOVE
+        if sweeps and heavy and self.contact_share(body) <= SWEEP_CONTACT_SHARE:
             return "split"
         return "iterative" if front > FRONT_ABOVE else "direct"
 

@@ -108,7 +108,7 @@ class System:
             AMG, :data:`~subdomain_contact.body.ITERATIVE`), ``"split"`` (GMRES on the
             factorised sweep over (T, φ), then u, :data:`~subdomain_contact.body.FACTORISED_SWEEP`)
             or ``"auto"``: for a body meshed in 3D, split where the problem has T or φ and u
-            and the body's largest front exceeds ``scene.SWEEP_FRONT_ABOVE`` DOFs,
+            and the body's largest front cubed over its DOFs exceeds ``scene.SWEEP_ABOVE``,
             iterative where it exceeds ``scene.FRONT_ABOVE``, direct otherwise
             (:meth:`~subdomain_contact.scene.Scene.solver_by_size`). The
             option ``-<prefix>body_<name>_solver direct|iterative|split`` wins for that body.

@@ -266,11 +266,11 @@ def test_bodies_spread_for_an_iterative_body_give_the_serial_solution(comm, monk
     """``placement="auto"`` spreads every body where a body that may be solved iteratively
     would keep the other ranks waiting; ``"groups"`` is kept as asked. The 3D cathode slot
     (block 646 of 1,034 cells: 1.2495 times the mean on 2 ranks, just under SPREAD_LOAD, so
-    1.2 here), every body made one that may be solved iteratively (SWEEP_FRONT_ABOVE 0). Under
+    1.2 here), every body made one that may be solved iteratively (SWEEP_ABOVE 0). Under
     mpiexec the spread scene holds its bodies over all ranks and its master layers on each
     (the groups' layout, one group): its Newton (T, φ, from 300 K) gives the serial solution.
     """
-    monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", 0)
+    monkeypatch.setattr(scene_module, "SWEEP_ABOVE", 0)
     monkeypatch.setattr(scene_module, "SPREAD_LOAD", 1.2)
     scene = cathode_slot_scene(0.06, 0.03, depth=0.04, comm=comm)
     grouped = cathode_slot_scene(0.06, 0.03, depth=0.04, comm=comm, placement="groups")

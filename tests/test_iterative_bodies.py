@@ -178,21 +178,22 @@ def test_the_contact_share_counts_the_vertices_on_the_contact_facets(comm):
 
 
 def test_the_rule_and_the_option_choose_each_body_solver(comm, monkeypatch):
-    """3D with a front above SWEEP_FRONT_ABOVE DOFs where T or φ meets u (held or floating)
-    and at most SWEEP_CONTACT_SHARE of the vertices are on contacts → split, any other
-    above FRONT_ABOVE → iterative; 2D never; the option wins."""
+    """3D with a front cubed over its DOFs above SWEEP_ABOVE where T or φ meets u (held or
+    floating) and at most SWEEP_CONTACT_SHARE of the vertices are on contacts → split, any
+    other with a front above FRONT_ABOVE → iterative; 2D never; the option wins."""
     blocks = blocks3d_scene(0.025, comm=comm)  # 1.6k DOFs per block, fronts of about 130
     row = blocks_row_scene(4, 0.05, comm=comm)  # T, φ, u: fronts of about 5 · 40
     shares = [row.contact_share(body) for body in row.bodies.values()]
     assert max(shares) < 0.5  # one or two faces of six
-    for sweep, other, share in ((1000, 50, 0.5), (50, 1000, 0.5), (50, 50, 0.0)):
-        monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", sweep)
+    # the row's blocks: fronts 210-220 over about 1,490 DOFs, F³/n 6,200-7,100 (measured)
+    for sweep, other, share in ((1e5, 50, 0.5), (1e3, 1000, 0.5), (1e3, 50, 0.0)):
+        monkeypatch.setattr(scene_module, "SWEEP_ABOVE", sweep)
         monkeypatch.setattr(scene_module, "FRONT_ABOVE", other)
         monkeypatch.setattr(scene_module, "SWEEP_CONTACT_SHARE", share)
         with sc.System(heated_blocks(blocks)) as system:  # T alone
             assert all(body.iterative == (other < 130) for body in system.bodies.values())
             assert not any(body.split for body in system.bodies.values())
-        swept = sweep < 200 and share > 0.0
+        swept = sweep < 5_000 and share > 0.0
         with sc.System(squeezed_row(row)) as system:  # the inner blocks held along x by contacts
             assert all(body.split == swept for body in system.bodies.values())
             assert all(body.iterative == (swept or other < 200) for body in system.bodies.values())
@@ -222,14 +223,15 @@ def test_bodies_are_placed_by_their_solvers_those_of_a_nesting_by_the_finer_mesh
     coarser scene loaded like it, placed first, takes the finer scene's groups placed so.
 
     The row of four 3D blocks at 0.06 m (704, 708, 694, 700 cells measured; fronts 140-145
-    with T, φ, u) and at 0.1 m (fronts 60), SWEEP_FRONT_ABOVE 100, the inner two given AMG by their
+    with T, φ, u; F³/n 2,290-2,550) and at 0.1 m (fronts 60, 617), SWEEP_ABOVE 1,000, the
+    inner two given AMG by their
     option (``-sc_body_block_1_solver iterative``; the rule gives every block the sweep): on
     the fine mesh the ends by the sweep and the inner two by AMG, on the coarse the ends
     factorised. By cells alone (largest first onto the lightest rank) the fine mesh's ends
     share one of 2 ranks and the inner two the other; by solvers each rank holds one of
     each kind.
     """
-    monkeypatch.setattr(scene_module, "SWEEP_FRONT_ABOVE", 100)
+    monkeypatch.setattr(scene_module, "SWEEP_ABOVE", 1_000)
     options = PETSc.Options()
     for name in ("block_1", "block_2"):
         options[f"sc_body_{name}_solver"] = "iterative"
